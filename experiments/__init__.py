@@ -1,0 +1,1 @@
+"""Benches, scenarios, baseline controllers, the runner, reports and the ``hystmpc`` CLI."""

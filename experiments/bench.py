@@ -1,0 +1,71 @@
+"""What a bench is: plant, nominal model, scenarios, controllers and the paper's figures."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from plants.base import Measurement
+
+
+class Controller(Protocol):
+    """Shape shared by every controller: ``reset()``, then ``step(measurement, refs)``."""
+
+    horizon: int
+    """Future reference samples the controller wants beyond the current one (0: causal)."""
+
+    def reset(self) -> None: ...
+
+    def step(self, measurement: Measurement, ref_window: np.ndarray) -> float: ...
+
+    def stats(self) -> dict | None: ...
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A reference trajectory with a name and a duration."""
+
+    name: str
+    description: str
+    duration: float
+    """Length of the run (s)."""
+    reference: Callable[[np.ndarray], np.ndarray]
+    """Reference as a function of time (vectorised)."""
+
+
+@dataclass(frozen=True)
+class ControllerSpec:
+    """A named controller: how to build it from the bench configuration."""
+
+    name: str
+    description: str
+    build: Callable[[dict[str, Any]], Controller]
+
+
+@dataclass(frozen=True)
+class Bench:
+    """One actuator from one paper, ready to simulate."""
+
+    name: str
+    description: str
+    paper: str
+    output_name: str
+    """Name of the reference column in a reference CSV (``angle``, ``torque``, ...)."""
+    units: str
+    input_units: str
+    sample_period: float
+    scenarios: dict[str, Scenario]
+    controllers: dict[str, ControllerSpec]
+    defaults: Callable[[], dict[str, Any]]
+    """Fresh parameter groups (``plant``, ``model``, controller groups) for ``--set``."""
+    make_plant: Callable[[dict[str, Any]], Any]
+    output_range: tuple[float, float]
+    """References outside this range are rejected."""
+    paper_figures: dict[tuple[str, str], dict[str, float]] = field(default_factory=dict)
+    input_bounds: tuple[float, float] = (-np.inf, np.inf)
+    loop: tuple[str, str, str, str] | None = None
+    """Hysteresis-loop plot: (truth key on x, truth key on y, x label, y label)."""
+    default_scenario: str = ""

@@ -1,0 +1,22 @@
+"""Registry of benches by public name."""
+
+from __future__ import annotations
+
+from experiments.bench import Bench
+
+
+def _pam() -> Bench:
+    from experiments.benches.pam import BENCH
+    return BENCH
+
+
+_FACTORIES = {"pam": _pam}
+BENCH_NAMES = tuple(_FACTORIES)
+DEFAULT_BENCH = "pam"
+
+
+def get_bench(name: str) -> Bench:
+    """The bench called ``name``; ``ValueError`` naming the allowed ones otherwise."""
+    if name not in _FACTORIES:
+        raise ValueError(f"unknown bench {name!r}; allowed: {', '.join(BENCH_NAMES)}")
+    return _FACTORIES[name]()

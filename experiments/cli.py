@@ -1,0 +1,192 @@
+"""``hystmpc`` command line (interface.md): list, run, compare.
+
+Exit codes: 0 success; 2 bad usage or bad input, with one line naming what is wrong and
+what is allowed; 1 anything else.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import os
+import sys
+from pathlib import Path
+
+from experiments.bench import Bench
+from experiments.benches import BENCH_NAMES, DEFAULT_BENCH, get_bench
+from experiments.config import apply_overrides, describe
+from experiments.reference import load_reference
+from experiments.report import comparison_table, results_document, write_json, write_run_csv
+from experiments.runner import RunResult, simulate
+from mpc.nmpc import SOLVERS
+
+
+class UsageError(Exception):
+    """Bad usage or bad input: exit code 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, exit 2 (argparse prints usage + message otherwise)
+        raise UsageError(message)
+
+
+def _add_run_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", help="results folder (default results/<bench>/<timestamp>)")
+    p.add_argument("--json", dest="json_file", help="also write the result document to this file")
+    p.add_argument("--reference", help="CSV with columns t and the bench's reference (or 'ref')")
+    p.add_argument("--duration", type=float, help="run length in seconds (default: the scenario's)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="parameter override, repeatable (e.g. nmpc.horizon=30); 'hystmpc list' names the groups")
+    p.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
+    p.add_argument("--no-plots", action="store_true", help="skip the figures")
+    p.add_argument("--quiet", action="store_true", help="print nothing but errors")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``hystmpc``."""
+    parser = _Parser(prog="hystmpc", description="NMPC for actuators with hysteresis: benches from four papers.")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    p_list = sub.add_parser("list", help="benches, scenarios, controllers, solver variants")
+    p_list.add_argument("--json", action="store_true", help="machine-readable output")
+    p_run = sub.add_parser("run", help="one closed-loop run")
+    p_run.add_argument("bench", help=f"one of {', '.join(BENCH_NAMES)}")
+    p_run.add_argument("scenario")
+    p_run.add_argument("--controller", required=True)
+    _add_run_options(p_run)
+    p_cmp = sub.add_parser("compare", help="every controller on every scenario, table and figures")
+    p_cmp.add_argument("bench", nargs="?", default=DEFAULT_BENCH, help=f"one of {', '.join(BENCH_NAMES)}")
+    p_cmp.add_argument("scenarios", nargs="*", help="default: all of the bench's scenarios")
+    p_cmp.add_argument("--controllers", help="comma-separated (default: all of the bench's)")
+    _add_run_options(p_cmp)
+    return parser
+
+
+def _bench(name: str) -> Bench:
+    try:
+        return get_bench(name)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def _check_names(kind: str, names: list[str], allowed) -> None:
+    for name in names:
+        if name not in allowed:
+            raise UsageError(f"unknown {kind} {name!r}; allowed: {', '.join(allowed)}")
+
+
+def _config(bench: Bench, overrides: list[str]):
+    try:
+        return apply_overrides(bench.defaults(), overrides)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def _scenario(bench: Bench, name: str, reference: str | None):
+    if reference is None:
+        return bench.scenarios[name]
+    try:
+        return load_reference(reference, bench)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[str]) -> int:
+    if args.duration is not None and not args.duration > 0:
+        raise UsageError(f"--duration must be > 0 seconds, got {args.duration}")
+    if args.reference is not None and len(scenario_names) != 1:
+        raise UsageError("--reference replaces one scenario's reference: name exactly one scenario")
+    config = _config(bench, args.overrides)
+    scenarios = [_scenario(bench, s, args.reference) for s in scenario_names]
+    out = Path(args.out) if args.out else Path("results") / bench.name / dt.datetime.now(
+        dt.UTC).strftime("%Y%m%dT%H%M%SZ")
+    total = sum(int(round((args.duration or s.duration) / bench.sample_period)) for s in scenarios) * len(controllers)
+    runs: list[RunResult] = []
+    from tqdm import tqdm
+    with tqdm(total=total, unit="step", disable=True if args.quiet else None, leave=False,
+              dynamic_ncols=True) as bar:
+        for scenario in scenarios:
+            for controller in controllers:
+                bar.set_description(f"{scenario.name} · {controller}")
+                run = simulate(bench, scenario, controller, config, seed=args.seed,
+                               duration=args.duration, progress=bar.update)
+                run.parameters = describe(config)
+                runs.append(run)
+                write_run_csv(run, out)
+    doc = results_document(bench, runs, command=sys.argv[1:] if sys.argv else None)
+    write_json(doc, out / "results.json")
+    if args.json_file:
+        write_json(doc, args.json_file)
+    table = comparison_table(bench, runs)
+    (out / "table.md").write_text(table + "\n")
+    figures = []
+    if not args.no_plots:
+        from experiments.plots import rmse_figure, scenario_figure
+        for scenario in scenarios:
+            subset = [r for r in runs if r.scenario == scenario.name]
+            figures.append(scenario_figure(bench, subset, out / f"{scenario.name}.png"))
+        if len(runs) > 1:
+            figures.append(rmse_figure(bench, runs, out / "rmse.png"))
+    if not args.quiet:
+        print(table)
+        print(f"\nresults: {out / 'results.json'}" + (f" and {args.json_file}" if args.json_file else ""))
+        if figures:
+            print("figures: " + ", ".join(str(f) for f in figures))
+        nmpc_runs = [r for r in runs if r.solver]
+        if nmpc_runs and any(r.solver["failures"] for r in nmpc_runs):
+            print("note: some NMPC solves failed; the fallback input was applied (see solver.failures)")
+    return 0
+
+
+def _list(args) -> int:
+    info = {}
+    for name in BENCH_NAMES:
+        bench = get_bench(name)
+        info[name] = {"description": bench.description, "paper": bench.paper, "units": bench.units,
+                      "sample_period_s": bench.sample_period, "scenarios": list(bench.scenarios),
+                      "controllers": list(bench.controllers), "parameter_groups": list(bench.defaults())}
+    if args.json:
+        print(json.dumps({"benches": info, "solvers": list(SOLVERS)}, indent=2))
+        return 0
+    for name, b in info.items():
+        print(f"{name}: {b['description']} [{b['units']}, {1 / b['sample_period_s']:g} Hz]")
+        print(f"  scenarios:   {', '.join(b['scenarios'])}")
+        print(f"  controllers: {', '.join(b['controllers'])}")
+        print(f"  --set groups: {', '.join(b['parameter_groups'])}")
+    print(f"solvers (--set nmpc.solver=...): {', '.join(SOLVERS)}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; returns the exit code."""
+    try:
+        args = build_parser().parse_args(argv)
+        if args.command == "list":
+            return _list(args)
+        bench = _bench(args.bench)
+        if args.command == "run":
+            _check_names("scenario", [args.scenario], bench.scenarios)
+            _check_names("controller", [args.controller], bench.controllers)
+            return _execute(args, bench, [args.scenario], [args.controller])
+        scenarios = args.scenarios or list(bench.scenarios)
+        _check_names("scenario", scenarios, bench.scenarios)
+        controllers = args.controllers.split(",") if args.controllers else list(bench.controllers)
+        _check_names("controller", controllers, bench.controllers)
+        return _execute(args, bench, scenarios, controllers)
+    except UsageError as exc:
+        print(f"hystmpc: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("hystmpc: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # noqa: BLE001 - anything unexpected: one line, exit 1
+        if os.environ.get("HYSTMPC_DEBUG"):
+            raise
+        print(f"hystmpc: error: {type(exc).__name__}: {exc} (set HYSTMPC_DEBUG=1 for a traceback)",
+              file=sys.stderr)
+        return 1
+
+
+def entry_point() -> None:
+    """Console-script wrapper."""
+    sys.exit(main())

@@ -1,0 +1,144 @@
+"""Result documents (``hystmpc.results/1``), per-run CSV trajectories and the comparison table."""
+
+from __future__ import annotations
+
+import csv
+import datetime as dt
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from experiments.bench import Bench
+from experiments.runner import RunResult
+
+SCHEMA = "hystmpc.results/1"
+
+
+def version() -> str:
+    """Installed hystmpc version (or ``0+unknown`` when running from a bare checkout)."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as _version
+    try:
+        return _version("hystmpc")
+    except PackageNotFoundError:
+        return "0+unknown"
+
+
+def run_entry(bench: Bench, run: RunResult) -> dict[str, Any]:
+    """One element of the document's ``runs`` list."""
+    entry: dict[str, Any] = {
+        "scenario": run.scenario, "controller": run.controller, "seed": run.seed,
+        "units": run.units, "sample_period_s": run.sample_period,
+        "metrics": run.metrics, "timing": run.timing,
+    }
+    if run.solver is not None:
+        entry["solver"] = run.solver
+    paper = bench.paper_figures.get((run.scenario, run.controller))
+    if paper:
+        entry["paper"] = dict(paper)
+    entry["parameters"] = run.parameters
+    return entry
+
+
+def results_document(bench: Bench, runs: list[RunResult], command: list[str] | None = None) -> dict:
+    """The full result document for a list of runs."""
+    doc = {"schema": SCHEMA, "bench": bench.name,
+           "created": dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+           "version": version(), "runs": [run_entry(bench, r) for r in runs]}
+    if command is not None:
+        doc["command"] = command
+    return _finite(doc)
+
+
+def _finite(obj):
+    """Replace NaN/inf by None so the document is strict JSON."""
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if np.isfinite(obj) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj
+
+
+def validate_document(doc: dict) -> None:
+    """Check the keys and types interface.md promises; ``ValueError`` on the first problem."""
+    for key, kind in (("schema", str), ("bench", str), ("created", str), ("version", str), ("runs", list)):
+        if not isinstance(doc.get(key), kind):
+            raise ValueError(f"results document: {key!r} missing or not {kind.__name__}")
+    if doc["schema"] != SCHEMA:
+        raise ValueError(f"results document: schema is {doc['schema']!r}, expected {SCHEMA!r}")
+    for i, run in enumerate(doc["runs"]):
+        for key, kind in (("scenario", str), ("controller", str), ("seed", int), ("units", str),
+                          ("sample_period_s", float), ("metrics", dict), ("timing", dict)):
+            if not isinstance(run.get(key), kind):
+                raise ValueError(f"results document: runs[{i}].{key} missing or not {kind.__name__}")
+        for key in ("rmse", "mae", "max_abs_error"):
+            value = run["metrics"].get(key)
+            if not isinstance(value, float) or not np.isfinite(value):
+                raise ValueError(f"results document: runs[{i}].metrics.{key} is not a finite number")
+        if not isinstance(run["metrics"].get("n_samples"), int):
+            raise ValueError(f"results document: runs[{i}].metrics.n_samples is not an integer")
+        for key in ("step_ms_median", "step_ms_p95", "step_ms_max"):
+            if not isinstance(run["timing"].get(key), float):
+                raise ValueError(f"results document: runs[{i}].timing.{key} is not a number")
+        if "solver" in run:
+            for key in ("name", "failures", "fallbacks"):
+                if key not in run["solver"]:
+                    raise ValueError(f"results document: runs[{i}].solver.{key} missing")
+
+
+def write_json(doc: dict, path: str | Path) -> None:
+    """Write a document as indented strict JSON, creating the folder."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
+
+
+def write_run_csv(run: RunResult, folder: str | Path) -> Path:
+    """``runs/<scenario>__<controller>.csv`` with t, reference, output, input, predicted."""
+    folder = Path(folder) / "runs"
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{run.scenario}__{run.controller}.csv"
+    extra = sorted(run.truth)
+    with path.open("w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(["t", "reference", "output", "input", "predicted", *(f"true_{k}" for k in extra)])
+        for k in range(len(run.t)):
+            row = [run.t[k], run.reference[k], run.output[k], run.input[k], run.predicted[k],
+                   *(run.truth[key][k] for key in extra)]
+            writer.writerow(["" if not np.isfinite(v) else f"{v:.9g}" for v in row])
+    return path
+
+
+def _fmt(value, digits=3) -> str:
+    if value is None or (isinstance(value, float) and not np.isfinite(value)):
+        return "–"
+    if isinstance(value, int):
+        return str(value)
+    return f"{value:.{digits}g}" if abs(value) < 1e-2 and value != 0 else f"{value:.{digits}f}"
+
+
+def comparison_table(bench: Bench, runs: list[RunResult]) -> str:
+    """Markdown table (readable in a terminal) of every run, like a paper's table."""
+    stepped = any("overshoot_pct" in r.metrics for r in runs)
+    head = ["scenario", "controller", f"RMSE [{bench.units}]", f"MAE [{bench.units}]", f"max abs error [{bench.units}]"]
+    if stepped:
+        head += ["overshoot [%]", "settling 2% [s]", f"ss error [{bench.units}]"]
+    head += ["ms/step median", "ms/step p95", "fails/fallbacks"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
+    for r in runs:
+        m = r.metrics
+        cells = [r.scenario, r.controller, _fmt(m["rmse"]), _fmt(m["mae"]), _fmt(m["max_abs_error"])]
+        if stepped:
+            cells += [_fmt(m.get("overshoot_pct"), 1), _fmt(m.get("settling_time_s"), 2),
+                      _fmt(m.get("steady_state_error"))]
+        timing = r.timing
+        cells += [_fmt(timing["step_ms_median"], 2), _fmt(timing["step_ms_p95"], 2),
+                  f"{r.solver['failures']}/{r.solver['fallbacks']}" if r.solver else "–"]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)

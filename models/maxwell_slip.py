@@ -1,0 +1,160 @@
+"""Maxwell-slip (elasto-slide) hysteresis, vo2012 Table 1.
+
+``M`` elements in parallel; element ``i`` is a spring of stiffness ``k_i`` in series with a
+slider that breaks away at force ``w_i``. Driven by input ``u`` (for the PAM joint: the joint
+angle in degrees), the output is the sum of element forces (there: Δp_hys in bar, eq. (3)).
+
+State: ``[u_last, F_1, ..., F_M]``, the last input and each element's force. The exact step is
+
+    F_i <- clip(F_i + k_i (u - u_last), -w_i, w_i),    y = Σ F_i,
+
+which equals ``Σ k_i (u - Play_{w_i/k_i}[u])`` (a sum of play operators) when started from a
+relaxed state. Because the output saturates at ``±Σ w_i``, the model is a *compensator*
+(vo2012 Fig. 1 adds ``y`` to the pressure command); its inverse exists for targets strictly
+inside ``(-Σ w_i, Σ w_i)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from models.smooth import smooth_clip
+
+
+@dataclass(frozen=True)
+class MaxwellSlip:
+    """Maxwell-slip hysteresis: parallel elasto-slide elements."""
+
+    k: tuple[float, ...]
+    """Element stiffnesses (output unit per input unit), all > 0."""
+    w: tuple[float, ...]
+    """Element break-away levels (output unit), all > 0."""
+
+    def __post_init__(self):
+        if len(self.k) != len(self.w):
+            raise ValueError(f"k and w differ in length: {len(self.k)} != {len(self.w)}")
+        if len(self.k) == 0:
+            raise ValueError("a Maxwell-slip model needs at least one element")
+        for name, values in (("k", self.k), ("w", self.w)):
+            if not all(np.isfinite(v) and v > 0 for v in values):
+                raise ValueError(f"{name} must be finite and > 0, got {values}")
+
+    @property
+    def n_elements(self) -> int:
+        """Number of elasto-slide elements ``M``."""
+        return len(self.k)
+
+    @property
+    def n_state(self) -> int:
+        """Length of the state vector ``[u_last, F_1..F_M]``."""
+        return 1 + len(self.k)
+
+    @property
+    def saturation(self) -> float:
+        """Largest output magnitude ``Σ w_i``."""
+        return float(sum(self.w))
+
+    def initial_state(self, u0: float = 0.0, forces=None) -> np.ndarray:
+        """State at input ``u0`` with the given element forces (default: relaxed, all zero)."""
+        f = np.zeros(self.n_elements) if forces is None else np.asarray(forces, float)
+        if f.shape != (self.n_elements,):
+            raise ValueError(f"forces must have {self.n_elements} entries, got {f.shape}")
+        return np.concatenate(([float(u0)], f))
+
+    def output(self, state) -> float:
+        """Output ``Σ F_i`` of a state."""
+        return float(np.sum(np.asarray(state)[1:]))
+
+    def step(self, state, u: float) -> tuple[np.ndarray, float]:
+        """Exact step: move the input to ``u``; return the new state and the output.
+
+        Parameters
+        ----------
+        state : array_like, shape (1 + M,)
+            ``[u_last, F_1, ..., F_M]``.
+        u : float
+            New input.
+        """
+        state = np.asarray(state, float)
+        k = np.asarray(self.k)
+        w = np.asarray(self.w)
+        forces = np.clip(state[1:] + k * (u - state[0]), -w, w)
+        return np.concatenate(([u], forces)), float(forces.sum())
+
+    def simulate(self, u_seq, state=None) -> tuple[np.ndarray, np.ndarray]:
+        """Exact response to an input sequence; returns ``(outputs, final_state)``."""
+        state = self.initial_state(u_seq[0]) if state is None else np.asarray(state, float)
+        out = np.empty(len(u_seq))
+        for i, u in enumerate(u_seq):
+            state, out[i] = self.step(state, u)
+        return out, state
+
+    def smooth_forces(self, forces, u_from, u_to, eps: float):
+        """Element forces after moving the input ``u_from -> u_to``, with ``clip`` smoothed.
+
+        Works on CasADi symbols and on NumPy values alike; each element's error against the
+        exact step is at most ``eps / 2`` per call (see :func:`models.smooth.smooth_clip`).
+        """
+        return [
+            smooth_clip(forces[i] + self.k[i] * (u_to - u_from), self.w[i], eps)
+            for i in range(self.n_elements)
+        ]
+
+    def smooth_step(self, eps: float) -> ca.Function:
+        """Smooth step as a CasADi Function ``(state, u) -> (state_next, y)``.
+
+        Over ``n`` steps the output error against :meth:`step` is at most ``n·M·eps/2``
+        (each smoothed clip errs by at most ``eps/2`` and is 1-Lipschitz).
+        """
+        if not eps > 0:
+            raise ValueError(f"eps must be > 0, got {eps}")
+        state = ca.SX.sym("state", self.n_state)
+        u = ca.SX.sym("u")
+        forces = self.smooth_forces([state[1 + i] for i in range(self.n_elements)], state[0], u, eps)
+        nxt = ca.vertcat(u, *forces)
+        return ca.Function(
+            "maxwell_slip_smooth", [state, u], [nxt, ca.sum1(ca.vertcat(*forces))],
+            ["state", "u"], ["state_next", "y"],
+        )
+
+    def inverse_step(self, state, y_target: float) -> tuple[np.ndarray, float]:
+        """Input that moves the output from ``state`` to ``y_target``, and the new state.
+
+        The output is monotone and piecewise linear in ``u`` along a monotone input path, so
+        the inverse is exact. Targets outside ``(-Σw, Σw)`` are unreachable: ``ValueError``.
+        """
+        state = np.asarray(state, float)
+        sat = self.saturation
+        if not (np.isfinite(y_target) and -sat < y_target < sat):
+            raise ValueError(f"y_target={y_target} is outside the reachable range (-{sat}, {sat})")
+        u0 = state[0]
+        forces = state[1:]
+        y0 = forces.sum()
+        if y_target == y0:
+            return state.copy(), float(u0)
+        direction = 1.0 if y_target > y0 else -1.0
+        k = np.asarray(self.k)
+        room = (direction * np.asarray(self.w) - forces) * direction  # input distance to saturate
+        breaks = np.sort(np.unique(np.maximum(room / k, 0.0)))
+        du_prev, y_prev = 0.0, y0
+        for du in breaks:
+            y_here = np.sum(np.clip(forces + direction * k * du, -np.asarray(self.w), np.asarray(self.w)))
+            if (y_here - y_target) * direction >= 0:
+                slope = (y_here - y_prev) / (du - du_prev)
+                du_hit = du_prev + (y_target - y_prev) / slope
+                return self.step(state, u0 + direction * du_hit)[0], float(u0 + direction * du_hit)
+            du_prev, y_prev = du, y_here
+        raise RuntimeError("unreachable: target inside the saturation band was not bracketed")
+
+
+def play_operator(u_seq, r: float, z0: float = 0.0) -> np.ndarray:
+    """Backlash (play) operator of half-width ``r``: ``z <- clip(z, u - r, u + r)``."""
+    out = np.empty(len(u_seq))
+    z = z0
+    for i, u in enumerate(u_seq):
+        z = min(max(z, u - r), u + r)
+        out[i] = z
+    return out

@@ -1,0 +1,16 @@
+"""Generic nonlinear MPC: nothing in this package knows about a particular actuator.
+
+* :class:`mpc.model.PredictionModel`: discrete-time nominal model ``x+ = F(x, u, d)``,
+  ``y = h(x, d)`` with a disturbance ``d`` held constant over the horizon (offset-free).
+* :class:`mpc.estimator.DisturbanceEKF`: extended Kalman filter on ``[x; d]``.
+* :class:`mpc.nmpc.Nmpc`: multiple-shooting tracking NLP (IPOPT by default).
+* :class:`mpc.controller.NmpcController`: estimator + NLP + warm starts + fallback.
+"""
+
+from mpc.controller import NmpcController
+from mpc.estimator import DisturbanceEKF
+from mpc.model import PredictionModel
+from mpc.nmpc import SOLVERS, Nmpc, NmpcSettings, NmpcStep
+
+__all__ = ["SOLVERS", "DisturbanceEKF", "Nmpc", "NmpcController", "NmpcSettings", "NmpcStep",
+           "PredictionModel"]

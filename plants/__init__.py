@@ -1,0 +1,10 @@
+"""Simulated actuators (the truth the controllers never see directly).
+
+Every plant has ``reset(seed) -> Measurement`` and ``step(u) -> Measurement`` and runs the
+exact, non-smooth hysteresis with its own (deliberately off-nominal) parameters.
+"""
+
+from plants.base import Measurement
+from plants.pam_joint import PamJoint, PamJointParams
+
+__all__ = ["Measurement", "PamJoint", "PamJointParams"]

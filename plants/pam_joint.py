@@ -1,0 +1,216 @@
+"""Antagonistic pneumatic-muscle joint with Maxwell-slip pressure/angle hysteresis (vo2012).
+
+Static torque (constraint model, eq. (1)): ``T = a(θ)·Δp_eff + b(θ)``, where the pressure
+difference that produces torque is the applied one minus the extracted hysteresis,
+``Δp_eff = Δp − Δp_hys`` (eqs. (3)–(4)), and ``Δp_hys = MS[θ]`` with θ in degrees.
+
+Dynamics (our choice; the paper gives no equation of motion)::
+
+    J θ'' = a(θ)(Δp − Δp_hys) + b(θ) − m g L sin θ − c θ' + T_creep(t)
+    Δp''  = ωp² (Δp_cmd(t − delay) − Δp) − 2 ζp ωp Δp' − ωp² c_v θ'   (|Δp'| ≤ slew)
+
+``a(θ) = a0 (1 − a_drop (θ/40°)²)`` and ``b(θ) = −K (θ + β θ³/θ40²)`` are chosen so that a
+1 kg payload needs about ±5 bar at ±40° (Fig. 3), and heavier payloads reach a smaller
+angle range within the same pressures.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from models.maxwell_slip import MaxwellSlip
+from plants.base import Measurement
+
+GRAVITY = 9.81
+DEG = np.pi / 180.0
+TABLE_1 = MaxwellSlip(
+    k=(0.0557, 0.0170, 0.0021, 0.0033),  # bar/deg, vo2012 Table 1
+    w=(0.1680, 0.1383, 0.0342, 0.1335),  # bar, vo2012 Table 1
+)
+
+
+@dataclass(frozen=True)
+class PamJointParams:
+    """Physical parameters of the PAM joint; the defaults are the *nominal* model."""
+
+    payload_kg: float = 1.0
+    """Payload on the lever (kg); vo2012 Fig. 7 uses 1 kg."""
+    lever_m: float = 0.30
+    """Lever arm of the payload (m); not given in the paper."""
+    arm_inertia: float = 0.010
+    """Inertia of arm, shaft and gear about the joint (kg m²)."""
+    damping: float = 0.80
+    """Viscous joint damping c (N m s/rad): about 40 % of critical with 1 kg (muscle sheaths
+    are strongly damped)."""
+    torque_per_bar: float = 2.0
+    """a0: muscle-pair torque per bar of pressure difference at θ = 0 (N m/bar)."""
+    torque_per_bar_drop: float = 0.15
+    """Relative loss of a(θ) at ±40° (muscle force falls with contraction)."""
+    passive_stiffness: float = 7.0
+    """K: restoring stiffness of the pre-pressurised muscle pair at θ = 0 (N m/rad)."""
+    passive_stiffening: float = 0.3
+    """β: cubic stiffening of b(θ), relative, at ±40°."""
+    hysteresis: MaxwellSlip = TABLE_1
+    """Δp_hys(θ) model (bar, θ in degrees)."""
+    pressure_wn: float = 18.0
+    """Natural frequency of the closed pressure loop (rad/s); Fig. 8a: lightly damped, ~3 Hz."""
+    pressure_zeta: float = 0.45
+    """Damping ratio of the pressure loop."""
+    pressure_delay_s: float = 0.04
+    """Transport delay of the pressure loop (s); a multiple of the sample period."""
+    pressure_slew: float = 40.0
+    """Largest rate of the pressure difference (bar/s), from valve flow."""
+    volume_coupling: float = 0.0
+    """c_v: pressure drop per joint rate from muscle volume change (bar per deg/s)."""
+    dp_limit: float = 6.0
+    """Valve command range ±dp_limit (bar): 6 bar supply."""
+    creep_torque: float = 0.0
+    """Muscle creep: torque lost as ``creep_torque·(1 − exp(−t/creep_time))`` (N m)."""
+    creep_time: float = 20.0
+    """Time constant of the creep drift (s)."""
+    encoder_counts: int = 8000
+    """Encoder counts per revolution after quadrature (2000 PPR × 4)."""
+    pressure_noise_bar: float = 0.005
+    """Standard deviation of the pressure-difference measurement noise (bar)."""
+    sample_period: float = 0.02
+    """Control sample period (s), vo2012: 20 ms."""
+    substeps: int = 20
+    """Integration substeps per sample in the plant."""
+
+    def __post_init__(self):
+        positive = ("lever_m", "arm_inertia", "torque_per_bar", "pressure_wn", "pressure_zeta",
+                    "pressure_slew", "dp_limit", "creep_time", "sample_period")
+        for name in positive:
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be finite and > 0, got {value}")
+        nonneg = ("payload_kg", "damping", "passive_stiffness", "pressure_delay_s",
+                  "volume_coupling", "creep_torque", "pressure_noise_bar")
+        for name in nonneg:
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be finite and >= 0, got {value}")
+        if not 0 <= self.torque_per_bar_drop < 1:
+            raise ValueError(f"torque_per_bar_drop must be in [0, 1), got {self.torque_per_bar_drop}")
+        if self.encoder_counts < 1 or self.substeps < 1:
+            raise ValueError("encoder_counts and substeps must be >= 1")
+        ratio = self.pressure_delay_s / self.sample_period
+        if abs(ratio - round(ratio)) > 1e-9:
+            raise ValueError(
+                f"pressure_delay_s={self.pressure_delay_s} must be a multiple of "
+                f"sample_period={self.sample_period}")
+
+    @property
+    def delay_samples(self) -> int:
+        """Pressure-loop delay in samples."""
+        return int(round(self.pressure_delay_s / self.sample_period))
+
+    @property
+    def inertia(self) -> float:
+        """Total inertia about the joint (kg m²)."""
+        return self.arm_inertia + self.payload_kg * self.lever_m**2
+
+
+def torque_slope(p: PamJointParams, theta_deg, xp=np):
+    """Constraint-model slope a(θ) in N m/bar, eq. (1)."""
+    return p.torque_per_bar * (1.0 - p.torque_per_bar_drop * (theta_deg / 40.0) ** 2)
+
+
+def torque_intercept(p: PamJointParams, theta_deg, xp=np):
+    """Constraint-model intercept b(θ) in N m, eq. (1)."""
+    return -p.passive_stiffness * theta_deg * DEG * (1.0 + p.passive_stiffening * (theta_deg / 40.0) ** 2)
+
+
+def gravity_torque(p: PamJointParams, theta_deg, xp=np):
+    """Torque the payload exerts to pull the lever back to 0 (N m)."""
+    return p.payload_kg * GRAVITY * p.lever_m * xp.sin(theta_deg * DEG)
+
+
+def constraint_pressure(p: PamJointParams, theta_deg, xp=np):
+    """Δp_cons, eq. (2): pressure difference that holds θ against the payload, no hysteresis."""
+    return (gravity_torque(p, theta_deg, xp) - torque_intercept(p, theta_deg, xp)) / torque_slope(p, theta_deg, xp)
+
+
+def joint_acceleration(p: PamJointParams, theta_deg, omega_deg, dp, dp_hys, extra_torque, xp=np):
+    """θ'' in deg/s² from the torque balance (see module docstring)."""
+    torque = (torque_slope(p, theta_deg, xp) * (dp - dp_hys) + torque_intercept(p, theta_deg, xp)
+              - gravity_torque(p, theta_deg, xp) - p.damping * omega_deg * DEG + extra_torque)
+    return torque / p.inertia / DEG
+
+
+@dataclass
+class PamJoint:
+    """Simulated antagonistic PAM joint; input: commanded Δp (bar); output: angle (deg)."""
+
+    params: PamJointParams = field(default_factory=PamJointParams)
+
+    def __post_init__(self):
+        self.reset(0)
+
+    @property
+    def sample_period(self) -> float:
+        """Control sample period (s)."""
+        return self.params.sample_period
+
+    def reset(self, seed: int) -> Measurement:
+        """Start at rest at θ = 0 with relaxed hysteresis; seed the sensor noise."""
+        p = self.params
+        self._rng = np.random.default_rng(seed)
+        self._t = 0.0
+        self._x = np.zeros(4)  # θ (deg), ω (deg/s), Δp (bar), Δp' (bar/s)
+        self._hys = p.hysteresis.initial_state(0.0)
+        self._queue = [0.0] * p.delay_samples
+        return self._measure()
+
+    def _creep(self, t: float) -> float:
+        p = self.params
+        return -p.creep_torque * (1.0 - np.exp(-t / p.creep_time))
+
+    def _rhs(self, x, dp_cmd, dp_hys, t):
+        p = self.params
+        theta, omega, dp, ddp = x
+        acc = joint_acceleration(p, theta, omega, dp, dp_hys, self._creep(t))
+        dd = p.pressure_wn**2 * (dp_cmd - dp - p.volume_coupling * omega) - 2 * p.pressure_zeta * p.pressure_wn * ddp
+        return np.array([omega, acc, ddp, dd])
+
+    def step(self, u: float) -> Measurement:
+        """Apply the commanded pressure difference ``u`` (bar) for one sample."""
+        if not np.isfinite(u):
+            raise ValueError(f"plant input must be finite, got {u}")
+        p = self.params
+        u = float(np.clip(u, -p.dp_limit, p.dp_limit))
+        self._queue.append(u)
+        dp_cmd = self._queue.pop(0)
+        h = p.sample_period / p.substeps
+        for _ in range(p.substeps):
+            dp_hys = p.hysteresis.output(self._hys)
+            x, t = self._x, self._t
+            k1 = self._rhs(x, dp_cmd, dp_hys, t)
+            k2 = self._rhs(x + h / 2 * k1, dp_cmd, dp_hys, t + h / 2)
+            k3 = self._rhs(x + h / 2 * k2, dp_cmd, dp_hys, t + h / 2)
+            k4 = self._rhs(x + h * k3, dp_cmd, dp_hys, t + h)
+            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            x[3] = np.clip(x[3], -p.pressure_slew, p.pressure_slew)
+            self._x = x
+            self._t = t + h
+            self._hys, _ = p.hysteresis.step(self._hys, x[0])
+        return self._measure()
+
+    def _measure(self) -> Measurement:
+        p = self.params
+        quantum = 360.0 / p.encoder_counts
+        theta, _, dp, _ = self._x
+        return Measurement(
+            t=self._t,
+            y=float(np.round(theta / quantum) * quantum),
+            sensors={"pressure": float(dp + p.pressure_noise_bar * self._rng.standard_normal())},
+            truth={"angle": float(theta), "pressure": float(dp),
+                   "dp_hys": p.hysteresis.output(self._hys)},
+        )
+
+
+def perturbed_hysteresis(base: MaxwellSlip, k_scale: float, w_scale: float) -> MaxwellSlip:
+    """Maxwell-slip model with stiffnesses and break-away levels scaled element-wise."""
+    return replace(base, k=tuple(k * k_scale for k in base.k), w=tuple(w * w_scale for w in base.w))

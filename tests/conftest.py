@@ -1,0 +1,21 @@
+"""Shared fixtures: fresh objects for every test, nothing stateful at import."""
+
+import numpy as np
+import pytest
+
+from models.maxwell_slip import MaxwellSlip
+
+
+@pytest.fixture
+def table1() -> MaxwellSlip:
+    """vo2012 Table 1."""
+    return MaxwellSlip(k=(0.0557, 0.0170, 0.0021, 0.0033), w=(0.1680, 0.1383, 0.0342, 0.1335))
+
+
+@pytest.fixture
+def reversing_input():
+    """A random walk in degrees with many reversals, starting at 0."""
+    rng = np.random.default_rng(7)
+    u = np.cumsum(rng.normal(0.0, 2.5, 400))
+    u[0] = 0.0
+    return u

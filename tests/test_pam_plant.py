@@ -1,0 +1,72 @@
+"""PAM joint plant and nominal physics: Fig. 3 ranges, equilibrium, sensors, seeds, errors."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from experiments.benches.pam import NOMINAL, PLANT
+from plants.pam_joint import PamJoint, PamJointParams, constraint_pressure
+
+
+def test_constraint_pressure_matches_fig3_ranges():
+    # vo2012 Fig. 3: about ±5 bar over ±40° at 1 kg; heavier loads cover less angle.
+    assert 4.0 <= constraint_pressure(NOMINAL, 40.0) <= 5.5
+    assert constraint_pressure(NOMINAL, -40.0) == pytest.approx(-constraint_pressure(NOMINAL, 40.0))
+    heavy = replace(NOMINAL, payload_kg=4.5)
+    angles = np.linspace(0, 40, 401)
+    reach_light = angles[constraint_pressure(NOMINAL, angles) <= 5.0].max()
+    reach_heavy = angles[constraint_pressure(heavy, angles) <= 5.0].max()
+    assert reach_heavy < 0.8 * reach_light
+
+
+def test_constant_pressure_settles_near_static_equilibrium():
+    plant = PamJoint(replace(NOMINAL, pressure_noise_bar=0.0))
+    plant.reset(0)
+    for _ in range(400):
+        meas = plant.step(2.0)
+    # at rest: a(θ)(Δp − Δp_hys) + b(θ) = m g L sin θ, i.e. Δp − Δp_hys = Δp_cons(θ)
+    theta = meas.truth["angle"]
+    assert meas.truth["pressure"] == pytest.approx(2.0, abs=1e-3)
+    assert 2.0 - meas.truth["dp_hys"] == pytest.approx(constraint_pressure(NOMINAL, theta), abs=2e-3)
+
+
+def test_encoder_quantisation_and_seeded_noise():
+    a, b, c = (PamJoint(PLANT) for _ in range(3))
+    ma, mb, mc = a.reset(5), b.reset(5), c.reset(6)
+    for _ in range(50):
+        ma, mb, mc = a.step(1.0), b.step(1.0), c.step(1.0)
+    quantum = 360.0 / PLANT.encoder_counts
+    assert ma.y / quantum == pytest.approx(round(ma.y / quantum), abs=1e-9)
+    assert abs(ma.y - ma.truth["angle"]) <= quantum / 2 + 1e-12
+    assert ma.sensors == mb.sensors
+    assert ma.sensors != mc.sensors
+
+
+def test_command_is_saturated_and_delayed():
+    plant = PamJoint(replace(NOMINAL, pressure_noise_bar=0.0))
+    plant.reset(0)
+    m1 = plant.step(100.0)
+    m2 = plant.step(100.0)
+    assert m1.truth["pressure"] == 0.0 and m2.truth["pressure"] == 0.0  # 2-sample delay
+    for _ in range(200):
+        m = plant.step(100.0)
+    assert m.truth["pressure"] == pytest.approx(NOMINAL.dp_limit, abs=1e-3)
+
+
+@pytest.mark.parametrize("change, match", [
+    ({"pressure_delay_s": 0.03}, "multiple of"),
+    ({"torque_per_bar": 0.0}, "torque_per_bar must be finite and > 0"),
+    ({"damping": -1.0}, "damping must be finite and >= 0"),
+    ({"torque_per_bar_drop": 1.0}, "torque_per_bar_drop"),
+])
+def test_parameter_validation(change, match):
+    with pytest.raises(ValueError, match=match):
+        PamJointParams(**change)
+
+
+def test_plant_rejects_nan_input():
+    plant = PamJoint(NOMINAL)
+    plant.reset(0)
+    with pytest.raises(ValueError, match="finite"):
+        plant.step(float("nan"))
