@@ -114,3 +114,11 @@ def test_parameter_validation(kwargs, match):
 def test_smooth_step_rejects_nonpositive_eps(table1):
     with pytest.raises(ValueError, match="eps must be > 0"):
         table1.smooth_step(0.0)
+
+
+def test_smoothing_error_report_is_within_bound(table1, reversing_input):
+    from experiments.analysis import smoothing_error
+    eps, window = 1e-3, 20
+    report = smoothing_error(table1, reversing_input, eps, window)
+    assert 0 < report["max_in_window"] <= window * table1.n_elements * eps / 2
+    assert report["rms_in_window"] <= report["max_in_window"]
