@@ -5,13 +5,14 @@ from __future__ import annotations
 import numpy as np
 
 
-def smoothing_error(model, inputs, eps: float, window: int) -> dict[str, float]:
+def smoothing_error(model, inputs, eps: float, window: int, **smooth_options) -> dict[str, float]:
     """Output error of ``model.smooth_step(eps)`` against ``model.step`` along ``inputs``.
 
     Works for any model with the common shape (``initial_state``, ``step``,
     ``smooth_step``). Two figures: the whole sequence open loop, and the worst over
     windows of ``window`` steps each restarted from the exact state, which is what the
-    NMPC's prediction faces (its estimate is re-anchored every sample).
+    NMPC's prediction faces (its estimate is re-anchored every sample). Extra keyword
+    arguments go to ``model.smooth_step``.
 
     Returns
     -------
@@ -21,7 +22,7 @@ def smoothing_error(model, inputs, eps: float, window: int) -> dict[str, float]:
     inputs = np.asarray(inputs, float)
     if window < 1 or len(inputs) < 2:
         raise ValueError(f"need window >= 1 and at least two inputs, got {window}, {len(inputs)}")
-    smooth = model.smooth_step(eps)
+    smooth = model.smooth_step(eps, **smooth_options)
     exact_states = [model.initial_state(inputs[0])]
     exact_out = [model.output(exact_states[0])]
     for u in inputs[1:]:

@@ -62,6 +62,7 @@ class NmpcController:
         self.failures = 0
         self.fallbacks = 0
         self.reinitialisations = 0
+        self.estimator_resets = 0
         self.iterations: list[int] = []
         self.statuses: dict[str, int] = {}
         self.predicted_output = float("nan")
@@ -82,6 +83,11 @@ class NmpcController:
             est.predict([self._u_last])
         self.predicted_output = float(self.nmpc.model.output(est.x, est.d))
         est.update(z)
+        if not (np.all(np.isfinite(est.x)) and np.all(np.isfinite(est.d))):
+            self.estimator_resets += 1  # never plan from a NaN estimate: start it again
+            est.reset(np.asarray(self.initial_state(z), float), np.zeros(self.nmpc.model.nd),
+                      self.initial_covariance)
+            self._plan = None
         x, d = est.x, est.d
         refs = ref_window[1:]
         u_inv = np.clip(np.asarray(self.inverse(x, d, refs), float).ravel(),
@@ -136,4 +142,5 @@ class NmpcController:
         its = np.asarray(self.iterations) if self.iterations else np.zeros(1)
         return {"name": self.settings.solver, "failures": self.failures, "fallbacks": self.fallbacks,
                 "iterations_median": float(np.median(its)), "iterations_max": int(its.max()),
-                "reinitialisations": self.reinitialisations, "statuses": dict(self.statuses)}
+                "reinitialisations": self.reinitialisations, "estimator_resets": self.estimator_resets,
+                "statuses": dict(self.statuses)}

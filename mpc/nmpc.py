@@ -40,6 +40,11 @@ class NmpcSettings:
     """Solver tolerance."""
     eps: float = 1e-3
     """Smoothing width of the hysteresis switching in the prediction model."""
+    direction_eps: float = 0.0
+    """Width of the direction detection (sign of the input change) in models that have one;
+    0: same as ``eps``. Must be well below the input change per sample."""
+    warm_multipliers: bool = False
+    """IPOPT only: also start from the previous solve's multipliers (warm_start_init_point)."""
 
     def __post_init__(self):
         if self.horizon < 2:
@@ -55,6 +60,8 @@ class NmpcSettings:
             raise ValueError(f"q_output must be > 0, got {self.q_output}")
         if self.max_iter < 1 or not self.tol > 0 or not self.eps > 0:
             raise ValueError("max_iter must be >= 1, tol and eps > 0")
+        if not (np.isfinite(self.direction_eps) and self.direction_eps >= 0):
+            raise ValueError(f"direction_eps must be finite and >= 0, got {self.direction_eps}")
 
 
 @dataclass
@@ -129,6 +136,9 @@ class Nmpc:
             opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
                     "ipopt.max_iter": s.max_iter, "ipopt.tol": s.tol,
                     "ipopt.acceptable_tol": 1e3 * s.tol, "record_time": True}
+            if s.warm_multipliers:
+                opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
+                             "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6})
             self._solver = ca.nlpsol("nmpc", "ipopt", nlp, opts)
         else:
             opts = {"qpsol": "qrqp", "qpsol_options": {"print_iter": False, "print_header": False,
@@ -143,6 +153,7 @@ class Nmpc:
         self._lbx = np.concatenate((-np.inf * np.ones(n_shoot), self.u_min * np.ones(N)))
         self._ubx = np.concatenate((np.inf * np.ones(n_shoot), self.u_max * np.ones(N)))
         self._n_shoot = n_shoot
+        self._lam = None
 
     def solve(self, x0, d, u_prev: float, ref, u_guess, x_guess=None, u_ff=None) -> NmpcStep:
         """Solve the NLP from state ``x0`` for the references ``ref[0..N-1]`` = r_{k+1..k+N}.
@@ -172,14 +183,18 @@ class Nmpc:
         p = np.concatenate((np.asarray(x0, float).ravel(), np.asarray(d, float).ravel(), [u_prev],
                             np.asarray(ref, float).ravel(), u_ff))
         w0 = np.concatenate((np.asarray(x_guess, float).ravel(), u_guess))
+        args = {"x0": w0, "p": p, "lbx": self._lbx, "ubx": self._ubx, "lbg": self._lbg, "ubg": self._ubg}
+        if self.settings.warm_multipliers and self._lam is not None and x_guess is not None:
+            args["lam_x0"], args["lam_g0"] = self._lam
         start = time.perf_counter()
-        sol = self._solver(x0=w0, p=p, lbx=self._lbx, ubx=self._ubx, lbg=self._lbg, ubg=self._ubg)
+        sol = self._solver(**args)
         elapsed = time.perf_counter() - start
         stats = self._solver.stats()
         w = np.asarray(sol["x"]).ravel()
         x_plan = w[: self._n_shoot].reshape(N + 1, nx)
         u_plan = w[self._n_shoot:].reshape(N, 1)
         success = bool(stats.get("success", False)) and bool(np.all(np.isfinite(w)))
+        self._lam = (np.asarray(sol["lam_x"]).ravel(), np.asarray(sol["lam_g"]).ravel()) if success else None
         return NmpcStep(u_plan=u_plan, x_plan=x_plan, success=success,
                         status=str(stats.get("return_status", "")),
                         iterations=int(stats.get("iter_count", -1)), solve_time=elapsed)

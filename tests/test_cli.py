@@ -26,7 +26,7 @@ def _csv(tmp_path, text, name="ref.csv"):
     (["run", "pam", "nosuch", "--controller", "nmpc"],
      "unknown scenario 'nosuch'; allowed: square-10, square-20, square-30, square-40, sine-30"),
     (["run", "pam", "square-10", "--controller", "lqr"], "unknown controller 'lqr'; allowed: pi, pi-hc, nmpc"),
-    (["run", "nosuch", "square-10", "--controller", "pi"], "unknown bench 'nosuch'; allowed: pam"),
+    (["run", "nosuch", "square-10", "--controller", "pi"], "unknown bench 'nosuch'; allowed: pam, compliant"),
     (["compare", "pam", "--controllers", "pi,lqr"], "unknown controller 'lqr'"),
     (["run", "pam", "square-10", "--controller", "pi", "--set", "nmpc.nosuch=3"],
      "unknown --set key 'nmpc.nosuch'; allowed: plant.payload_kg"),
@@ -109,6 +109,7 @@ def test_list_json(capsys):
     assert code == 0
     info = json.loads(out)
     assert info["benches"]["pam"]["controllers"] == ["pi", "pi-hc", "nmpc"]
+    assert info["benches"]["compliant"]["controllers"] == ["pid", "inverse-ff-pid", "nmpc"]
     assert "ipopt" in info["solvers"]
 
 

@@ -10,7 +10,12 @@ def _pam() -> Bench:
     return BENCH
 
 
-_FACTORIES = {"pam": _pam}
+def _compliant() -> Bench:
+    from experiments.benches.compliant import BENCH
+    return BENCH
+
+
+_FACTORIES = {"pam": _pam, "compliant": _compliant}
 BENCH_NAMES = tuple(_FACTORIES)
 DEFAULT_BENCH = "pam"
 

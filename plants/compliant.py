@@ -1,0 +1,124 @@
+"""Nonlinear-stiffness compliant actuator with power-function hysteresis (zhou2024).
+
+The output plate is fixed to the torque sensor (torque-tracking tests of Section V-C), so
+the deformation angle θ1 is the motor's angle. The motor is a Maxon RE40 under a position
+loop, modelled as a second-order lag with a rate limit::
+
+    θm'' = ωs² (θ_cmd(t − delay) − θm) − 2 ζs ωs θm',   |θm'| ≤ rate_limit
+    θ1 = Play_backlash[θm]                         (gearhead clearance)
+
+The torque is the power-function hysteresis of the virtual deformation, τ = H[s(θ1)]
+(eqs. (8)–(19)). Sensors: a 500 CPT encoder on the motor side (quadrature, through the
+gearhead, so it does not see the backlash) and the ATI Mini45 with a resolution of
+1/1504 N m; 100 Hz. The command reaches the drive one sample late (host → drive).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from models.power_function import PowerFunctionHysteresis, VirtualDeformation
+from plants.base import Measurement
+
+
+@dataclass(frozen=True)
+class CompliantParams:
+    """Parameters of the compliant actuator; the defaults are the *nominal* model."""
+
+    hysteresis: PowerFunctionHysteresis = PowerFunctionHysteresis()
+    """Torque/virtual-deformation hysteresis (Tables V–VII)."""
+    geometry: VirtualDeformation = VirtualDeformation()
+    """Virtual deformation s(θ1), eq. (8)."""
+    servo_wn: float = 60.0
+    """Natural frequency of the motor position loop (rad/s), about 10 Hz."""
+    servo_zeta: float = 0.8
+    """Damping ratio of the position loop."""
+    rate_limit: float = 3.0
+    """Largest motor speed at the output (rad/s)."""
+    angle_limit: float = 0.5
+    """|θ1| range (rad), Table I."""
+    command_delay: int = 1
+    """Samples between the controller's command and the drive acting on it."""
+    backlash: float = 0.0
+    """Half-width of the gearhead clearance between motor and θ1 (rad); nominal: none."""
+    encoder_counts: int = 2000 * 43
+    """Counts per output revolution: 500 CPT × 4 (quadrature) × 43:1 gearhead (our choice)."""
+    torque_resolution: float = 1.0 / 1504.0
+    """Torque-sensor resolution (N m), Section V."""
+    torque_noise: float = 0.0003
+    """Torque-sensor noise before quantisation (N m, standard deviation)."""
+    sample_period: float = 0.01
+    """Control sample period (s): 100 Hz."""
+    substeps: int = 10
+    """Integration substeps per sample in the plant."""
+
+    def __post_init__(self):
+        for name in ("servo_wn", "servo_zeta", "rate_limit", "angle_limit", "torque_resolution",
+                     "sample_period"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be finite and > 0, got {value}")
+        if not (np.isfinite(self.torque_noise) and self.torque_noise >= 0):
+            raise ValueError(f"torque_noise must be finite and >= 0, got {self.torque_noise}")
+        if self.command_delay < 0 or not (np.isfinite(self.backlash) and self.backlash >= 0):
+            raise ValueError("command_delay and backlash must be >= 0")
+        if self.encoder_counts < 1 or self.substeps < 1:
+            raise ValueError("encoder_counts and substeps must be >= 1")
+
+
+@dataclass
+class CompliantActuator:
+    """Simulated compliant actuator; input: motor angle command (rad); output: torque (N m)."""
+
+    params: CompliantParams = field(default_factory=CompliantParams)
+
+    def __post_init__(self):
+        self.reset(0)
+
+    @property
+    def sample_period(self) -> float:
+        """Control sample period (s)."""
+        return self.params.sample_period
+
+    def reset(self, seed: int) -> Measurement:
+        """Start at rest at zero torque on the ascending branch; seed the sensor noise."""
+        p = self.params
+        self._rng = np.random.default_rng(seed)
+        self._hys = p.hysteresis.initial_state()
+        self._theta = float(p.geometry.theta(self._hys[0]))  # θ1 at the output
+        self._motor = self._theta  # backlash centred
+        self._omega = 0.0
+        self._queue = [self._theta] * p.command_delay
+        self._t = 0.0
+        return self._measure()
+
+    def step(self, theta_cmd: float) -> Measurement:
+        """Apply the motor angle command (rad) for one sample."""
+        if not np.isfinite(theta_cmd):
+            raise ValueError(f"plant input must be finite, got {theta_cmd}")
+        p = self.params
+        self._queue.append(float(np.clip(theta_cmd, -p.angle_limit, p.angle_limit)))
+        cmd = self._queue.pop(0)
+        h = p.sample_period / p.substeps
+        for _ in range(p.substeps):
+            acc = p.servo_wn**2 * (cmd - self._motor) - 2 * p.servo_zeta * p.servo_wn * self._omega
+            self._omega = float(np.clip(self._omega + h * acc, -p.rate_limit, p.rate_limit))
+            self._motor += h * self._omega  # semi-implicit Euler at 1 ms: stable for ωs h = 0.06
+            self._theta = min(max(self._theta, self._motor - p.backlash), self._motor + p.backlash)
+            self._hys, _ = p.hysteresis.step(self._hys, float(p.geometry.s(self._theta)))
+        self._t += p.sample_period
+        return self._measure()
+
+    def _measure(self) -> Measurement:
+        p = self.params
+        quantum = 2 * np.pi / p.encoder_counts
+        tau = p.hysteresis.output(self._hys)
+        noisy = tau + p.torque_noise * self._rng.standard_normal()
+        return Measurement(
+            t=self._t,
+            y=float(np.round(noisy / p.torque_resolution) * p.torque_resolution),
+            sensors={"angle": float(np.round(self._motor / quantum) * quantum)},
+            truth={"torque": tau, "angle": self._theta, "s": float(self._hys[0])},
+        )
