@@ -9,11 +9,12 @@ inverse model). Scenarios: square waves of 10–40° at 0.1 Hz (two cycles, Fig.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import casadi as ca
 import numpy as np
 
+from experiments.baselines import Pid, PidGains
 from experiments.bench import Bench, ControllerSpec, Scenario
 from models.maxwell_slip import MaxwellSlip
 from mpc import DisturbanceEKF, Nmpc, NmpcController, NmpcSettings, PredictionModel
@@ -46,53 +47,34 @@ a slower, less damped pressure loop with a slew limit and volume coupling, and a
 creep drift over 20 s (vo2012 Section 1: creep makes the joint time-varying)."""
 
 
-@dataclass(frozen=True)
-class PiGains:
-    """PI on the angle error; output: Δp command in bar. Same gains with and without HC."""
-
-    kp: float = 0.08
-    """Proportional gain (bar/deg)."""
-    ki: float = 0.4
-    """Integral gain (bar/(deg s))."""
-
-    def __post_init__(self):
-        for name in ("kp", "ki"):
-            if not (np.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
-                raise ValueError(f"{name} must be finite and >= 0, got {getattr(self, name)}")
-
-
 class PamPi:
-    """vo2012 Fig. 1: PI on the angle error, optionally plus Δp_hys from the MS model."""
+    """vo2012 Fig. 1: PI on the angle error, optionally plus Δp_hys from the MS model.
+
+    The gains (group ``pi``) are the same with and without compensation, as in the paper.
+    """
 
     horizon = 0
 
-    def __init__(self, gains: PiGains, model: PamJointParams, compensate: bool):
-        self.gains = gains
+    def __init__(self, gains: PidGains, model: PamJointParams, compensate: bool):
         self.model = model
         self.compensate = compensate
+        self.pid = Pid(gains, model.sample_period, (-model.dp_limit, model.dp_limit))
         self.reset()
 
     def reset(self) -> None:
         """Clear the integrator and the compensator's memory."""
-        self._integral = 0.0
+        self.pid.reset()
         self._hys = None
         self.predicted_output = float("nan")
 
     def step(self, measurement: Measurement, ref_window) -> float:
-        """PI output (+ compensation) for this sample, with clamping anti-windup."""
-        dt = self.model.sample_period
-        e = float(ref_window[0]) - measurement.y
+        """PI output (+ compensation) for this sample."""
         comp = 0.0
         if self.compensate:
             if self._hys is None:
                 self._hys = self.model.hysteresis.initial_state(measurement.y)
             self._hys, comp = self.model.hysteresis.step(self._hys, measurement.y)
-        integral = self._integral + self.gains.ki * e * dt
-        u = self.gains.kp * e + integral + comp
-        limit = self.model.dp_limit
-        if abs(u) <= limit or np.sign(e) != np.sign(u):
-            self._integral = integral
-        return float(np.clip(self.gains.kp * e + self._integral + comp, -limit, limit))
+        return self.pid.update(float(ref_window[0]) - measurement.y, comp)
 
     def stats(self) -> None:
         return None
@@ -224,7 +206,8 @@ def _sine(amplitude: float) -> Scenario:
 
 
 def _defaults() -> dict:
-    return {"plant": PLANT, "model": NOMINAL, "pi": PiGains(), "nmpc": NmpcSettings()}
+    # PI gains (bar/deg, bar/(deg s)) from a grid search; see docs/pam.md.
+    return {"plant": PLANT, "model": NOMINAL, "pi": PidGains(kp=0.08, ki=0.4), "nmpc": NmpcSettings()}
 
 
 def _scenarios() -> dict[str, Scenario]:
