@@ -69,3 +69,37 @@ class Bench:
     loop: tuple[str, str, str, str] | None = None
     """Hysteresis-loop plot: (truth key on x, truth key on y, x label, y label)."""
     default_scenario: str = ""
+
+
+class NmpcAdapter:
+    """Runs a :class:`mpc.NmpcController` as a bench controller.
+
+    Parameters
+    ----------
+    controller : mpc.NmpcController
+        Estimator + NLP of the bench's nominal model.
+    sensors : callable
+        ``Measurement -> z``: the sensor vector the model's ``measure`` function predicts.
+    """
+
+    def __init__(self, controller, sensors: Callable[[Measurement], np.ndarray]):
+        self.controller = controller
+        self.sensors = sensors
+        self.horizon = controller.horizon
+
+    @property
+    def predicted_output(self) -> float:
+        """The model's one-step-ahead prediction of this sample's output."""
+        return self.controller.predicted_output
+
+    def reset(self) -> None:
+        """Forget the estimate, plan and counters."""
+        self.controller.reset()
+
+    def step(self, measurement: Measurement, ref_window) -> float:
+        """NMPC input for this sample."""
+        return self.controller.step(self.sensors(measurement), ref_window)
+
+    def stats(self) -> dict:
+        """Solver statistics."""
+        return self.controller.stats()

@@ -15,7 +15,7 @@ import casadi as ca
 import numpy as np
 
 from experiments.baselines import Pid, PidGains
-from experiments.bench import Bench, ControllerSpec, Scenario
+from experiments.bench import Bench, ControllerSpec, NmpcAdapter, Scenario
 from models.power_function import PowerFunctionHysteresis
 from mpc import DisturbanceEKF, Nmpc, NmpcController, NmpcSettings, PredictionModel
 from plants.base import Measurement
@@ -124,46 +124,25 @@ def inverse_inputs(p: CompliantParams, x, d, refs) -> np.ndarray:
     return np.clip(out, -p.angle_limit, p.angle_limit)
 
 
-class CompliantNmpc:
-    """Bench adapter for the generic NMPC: sensors → [angle, torque]."""
+def build_nmpc(model: CompliantParams, settings: NmpcSettings) -> NmpcAdapter:
+    """The ``nmpc`` controller: EKF on [motor angle, torque] sensors, NLP, inverse warm start."""
+    pm = prediction_model(model, settings.eps, direction_eps=settings.direction_eps or None)
+    nmpc = Nmpc(pm, settings, -model.angle_limit, model.angle_limit, model.rate_limit * model.sample_period)
+    quantum = 2 * np.pi / model.encoder_counts
+    r_tau = model.torque_resolution**2 / 12 + model.torque_noise**2
+    D = model.command_delay
+    q_noise = [1e-9, 1e-4, 1e-12, 1e-12, 1e-12, 1e-12, 1e-10, 1e-8] + [1e-14] * D + [1e-6]
+    ekf = DisturbanceEKF(pm, q_noise, [quantum**2 / 12 + 1e-12, r_tau])
+    p0 = [1e-8, 1e-4, 1e-10, 1e-12, 1e-10, 1e-10, 1e-6, 1e-6] + [1e-14] * D + [1e-2]
+    hys = model.hysteresis
 
-    def __init__(self, model: CompliantParams, settings: NmpcSettings):
-        self.model = model
-        pm = prediction_model(model, settings.eps, direction_eps=settings.direction_eps or None)
-        nmpc = Nmpc(pm, settings, -model.angle_limit, model.angle_limit, model.rate_limit * model.sample_period)
-        quantum = 2 * np.pi / model.encoder_counts
-        r_tau = model.torque_resolution**2 / 12 + model.torque_noise**2
-        D = model.command_delay
-        q_noise = [1e-9, 1e-4, 1e-12, 1e-12, 1e-12, 1e-12, 1e-10, 1e-8] + [1e-14] * D + [1e-6]
-        ekf = DisturbanceEKF(pm, q_noise, [quantum**2 / 12 + 1e-12, r_tau])
-        p0 = [1e-8, 1e-4, 1e-10, 1e-12, 1e-10, 1e-10, 1e-6, 1e-6] + [1e-14] * D + [1e-2]
-        hys = model.hysteresis
+    def initial_state(z):
+        s = float(model.geometry.s(z[0]))
+        return np.concatenate(([z[0], 0.0], hys.initial_state(s), np.full(D, z[0])))
 
-        def initial_state(z):
-            s = float(model.geometry.s(z[0]))
-            return np.concatenate(([z[0], 0.0], hys.initial_state(s), np.full(D, z[0])))
-
-        self.controller = NmpcController(
-            nmpc, ekf, initial_state, lambda x, d, r: inverse_inputs(model, x, d, r), p0,
-            jump_threshold=0.2)
-        self.horizon = settings.horizon
-
-    @property
-    def predicted_output(self) -> float:
-        """The model's one-step-ahead prediction of this sample's torque."""
-        return self.controller.predicted_output
-
-    def reset(self) -> None:
-        """Forget estimate, plan and counters."""
-        self.controller.reset()
-
-    def step(self, measurement: Measurement, ref_window) -> float:
-        """NMPC motor angle command."""
-        return self.controller.step(np.array([measurement.sensors["angle"], measurement.y]), ref_window)
-
-    def stats(self) -> dict:
-        """Solver statistics."""
-        return self.controller.stats()
+    controller = NmpcController(nmpc, ekf, initial_state, lambda x, d, r: inverse_inputs(model, x, d, r), p0,
+                                jump_threshold=0.2)
+    return NmpcAdapter(controller, lambda m: np.array([m.sensors["angle"], m.y]))
 
 
 def _sine(amplitude: float) -> Scenario:
@@ -192,7 +171,7 @@ BENCH = Bench(
         "inverse-ff-pid": ControllerSpec("inverse-ff-pid", "inverse power-function model + PID (Fig. 14)",
                                          lambda c: CompliantPid(c["pid"], c["model"], feedforward=True)),
         "nmpc": ControllerSpec("nmpc", "torque NMPC, smoothed power-function model, inverse warm start",
-                               lambda c: CompliantNmpc(c["model"], c["nmpc"])),
+                               lambda c: build_nmpc(c["model"], c["nmpc"])),
     },
     defaults=_defaults,
     make_plant=lambda c: CompliantActuator(c["plant"]),

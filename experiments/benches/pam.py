@@ -15,7 +15,7 @@ import casadi as ca
 import numpy as np
 
 from experiments.baselines import Pid, PidGains
-from experiments.bench import Bench, ControllerSpec, Scenario
+from experiments.bench import Bench, ControllerSpec, NmpcAdapter, Scenario
 from models.maxwell_slip import MaxwellSlip
 from mpc import DisturbanceEKF, Nmpc, NmpcController, NmpcSettings, PredictionModel
 from plants.base import Measurement
@@ -146,49 +146,22 @@ def inverse_inputs(p: PamJointParams, x, d, refs) -> np.ndarray:
     return need
 
 
-def _build_nmpc(config) -> PamNmpc:
-    return PamNmpc(config["model"], config["nmpc"])
+def build_nmpc(model: PamJointParams, settings: NmpcSettings) -> NmpcAdapter:
+    """The ``nmpc`` controller: EKF on [θ, Δp] sensors, NLP, inverse warm start."""
+    pm = prediction_model(model, settings.eps)
+    D, M = model.delay_samples, model.hysteresis.n_elements
+    nmpc = Nmpc(pm, settings, -model.dp_limit, model.dp_limit, model.pressure_slew * model.sample_period)
+    q_noise = [1e-6, 1e-2, 1e-5, 1e-2] + [1e-12] * D + [1e-7] * M + [1e-4]
+    quantum = 360.0 / model.encoder_counts
+    ekf = DisturbanceEKF(pm, q_noise, [quantum**2 / 12 + 1e-6, model.pressure_noise_bar**2 + 1e-6])
+    p0 = [1e-3, 1.0, 1e-3, 1.0] + [1e-12] * D + [1e-4] * M + [0.1]
 
+    def initial_state(z):
+        return np.concatenate(([z[0], 0.0, z[1], 0.0], np.zeros(D + M)))
 
-class PamNmpc:
-    """Bench adapter: measurement → sensor vector, references → NMPC."""
-
-    def __init__(self, model: PamJointParams, settings: NmpcSettings):
-        self.model = model
-        self.settings = settings
-        pm = prediction_model(model, settings.eps)
-        D, M = model.delay_samples, model.hysteresis.n_elements
-        nmpc = Nmpc(pm, settings, -model.dp_limit, model.dp_limit, model.pressure_slew * model.sample_period)
-        q_noise = [1e-6, 1e-2, 1e-5, 1e-2] + [1e-12] * D + [1e-7] * M + [1e-4]
-        quantum = 360.0 / model.encoder_counts
-        ekf = DisturbanceEKF(pm, q_noise, [quantum**2 / 12 + 1e-6, model.pressure_noise_bar**2 + 1e-6])
-        p0 = [1e-3, 1.0, 1e-3, 1.0] + [1e-12] * D + [1e-4] * M + [0.1]
-
-        def initial_state(z):
-            return np.concatenate(([z[0], 0.0, z[1], 0.0], np.zeros(D + M)))
-
-        self.controller = NmpcController(
-            nmpc, ekf, initial_state, lambda x, d, r: inverse_inputs(model, x, d, r), p0,
-            jump_threshold=1.0)
-        self.horizon = settings.horizon
-
-    @property
-    def predicted_output(self) -> float:
-        """The model's one-step-ahead prediction of this sample's output."""
-        return self.controller.predicted_output
-
-    def reset(self) -> None:
-        """Forget the estimate, plan and counters."""
-        self.controller.reset()
-
-    def step(self, measurement: Measurement, ref_window) -> float:
-        """NMPC input for this sample."""
-        z = np.array([measurement.y, measurement.sensors["pressure"]])
-        return self.controller.step(z, ref_window)
-
-    def stats(self) -> dict:
-        """Solver statistics."""
-        return self.controller.stats()
+    controller = NmpcController(nmpc, ekf, initial_state, lambda x, d, r: inverse_inputs(model, x, d, r), p0,
+                                jump_threshold=1.0)
+    return NmpcAdapter(controller, lambda m: np.array([m.y, m.sensors["pressure"]]))
 
 
 def _square(amplitude: float) -> Scenario:
@@ -230,7 +203,7 @@ BENCH = Bench(
         "pi-hc": ControllerSpec("pi-hc", "PI + Maxwell-slip hysteresis compensation (Fig. 1)",
                                 lambda c: PamPi(c["pi"], c["model"], compensate=True)),
         "nmpc": ControllerSpec("nmpc", "offset-free NMPC, smoothed Maxwell-slip model, inverse warm start",
-                               _build_nmpc),
+                               lambda c: build_nmpc(c["model"], c["nmpc"])),
     },
     defaults=_defaults,
     make_plant=lambda c: PamJoint(c["plant"]),
