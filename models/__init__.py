@@ -13,7 +13,12 @@ Every model follows one shape (see :mod:`models.maxwell_slip` for the first):
 The memory is always passed in and returned, never kept on the object.
 """
 
+from models.lambertw import lambertw, lambertw_function
 from models.maxwell_slip import MaxwellSlip
+from models.parametric import ParametricHysteresis, identify_major_loop
+from models.power_function import PowerFunctionHysteresis, VirtualDeformation
 from models.smooth import smooth_abs, smooth_clip, smooth_max, smooth_min
 
-__all__ = ["MaxwellSlip", "smooth_abs", "smooth_clip", "smooth_max", "smooth_min"]
+__all__ = ["MaxwellSlip", "ParametricHysteresis", "PowerFunctionHysteresis", "VirtualDeformation",
+           "identify_major_loop", "lambertw", "lambertw_function", "smooth_abs", "smooth_clip",
+           "smooth_max", "smooth_min"]

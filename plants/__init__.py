@@ -7,5 +7,7 @@ exact, non-smooth hysteresis with its own (deliberately off-nominal) parameters.
 from plants.base import Measurement
 from plants.compliant import CompliantActuator, CompliantParams
 from plants.pam_joint import PamJoint, PamJointParams
+from plants.reluctance import ReluctanceActuator, ReluctanceParams
 
-__all__ = ["CompliantActuator", "CompliantParams", "Measurement", "PamJoint", "PamJointParams"]
+__all__ = ["CompliantActuator", "CompliantParams", "Measurement", "PamJoint", "PamJointParams",
+           "ReluctanceActuator", "ReluctanceParams"]

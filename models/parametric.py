@@ -1,0 +1,238 @@
+"""Parametric hysteresis operator and its closed-form inverse (katalenic2013, Defs. 3.1–3.4).
+
+Memory: the input and output at the last input extremum, (u0, v0), and the direction s
+of the input since then (Definitions 3.1–3.2; sgn+ is right-continuous, so a standing
+input keeps its direction). With m as below,
+
+* direct (eq. (3)):  v = u − u0 + v0 + s·( W(p2·m·e^{p2 (m − |u − u0|)}) / p2 − m ),
+                     m = p1 + s (v0 − u0);
+* inverse (eq. (5)): v = u − u0 + v0 + s·m·(1 − e^{−p2 |u − u0|}),
+                     m = p1 + s (u0 − v0).
+
+Both stay between the asymptotes v = u ± p1, and H[IH[u]] = u when their memories
+correspond. State: ``[u_last, s, u0, v0, v_last]``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from models.lambertw import lambertw, lambertw_expr
+
+
+@dataclass(frozen=True)
+class ParametricHysteresis:
+    """Direct operator H (eq. (3)); :meth:`inverse_step` is IH (eq. (5))."""
+
+    p1: float
+    """Largest half-width of the loop (input units; A for the reluctance actuator)."""
+    p2: float
+    """Rate of approach to the asymptotes (1 / input units)."""
+
+    def __post_init__(self):
+        for name in ("p1", "p2"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be finite and > 0, got {value}")
+
+    n_state = 5
+
+    def initial_state(self, u0: float = 0.0, v0: float | None = None, direction: float = 1.0) -> np.ndarray:
+        """Memory at an extremum (u0, v0) (default v0 = u0: demagnetised) moving in ``direction``."""
+        v0 = u0 if v0 is None else v0
+        if abs(v0 - u0) > self.p1:
+            raise ValueError(f"|v0 - u0| = {abs(v0 - u0)} exceeds p1 = {self.p1}: outside the asymptotes")
+        return np.array([u0, 1.0 if direction >= 0 else -1.0, u0, v0, v0])
+
+    def output(self, state) -> float:
+        """Output of a state."""
+        return float(state[4])
+
+    @staticmethod
+    def _update_memory(state, u):
+        u_last, s, u0, v0, v_last = (float(v) for v in state)
+        if u != u_last:
+            direction = 1.0 if u > u_last else -1.0
+            if direction != s:  # u_last was an extremum (Definition 3.1)
+                u0, v0, s = u_last, v_last, direction
+        return s, u0, v0
+
+    def direct(self, u, s, u0, v0):
+        """Eq. (3) for given memory; NumPy or CasADi arguments."""
+        lib = ca if isinstance(u, (ca.SX, ca.MX)) else np
+        w = lambertw_expr if lib is ca else lambertw
+        m = self.p1 + s * (v0 - u0)
+        du = lib.fabs(u - u0) if lib is ca else abs(u - u0)
+        return u - u0 + v0 + s * (w(self.p2 * m * lib.exp(self.p2 * (m - du))) / self.p2 - m)
+
+    def inverse(self, u, s, u0, v0):
+        """Eq. (5) for given memory (the memory of IH's own input and output)."""
+        lib = ca if isinstance(u, (ca.SX, ca.MX)) else np
+        m = self.p1 + s * (u0 - v0)
+        du = lib.fabs(u - u0) if lib is ca else abs(u - u0)
+        return u - u0 + v0 + s * m * (1 - lib.exp(-self.p2 * du))
+
+    def step(self, state, u: float) -> tuple[np.ndarray, float]:
+        """Exact step of H to input ``u``; returns ``(state, v)``."""
+        s, u0, v0 = self._update_memory(state, u)
+        v = float(self.direct(u, s, u0, v0))
+        return np.array([u, s, u0, v0, v]), v
+
+    def simulate(self, u_seq, state=None) -> tuple[np.ndarray, np.ndarray]:
+        """Exact response of H to a sequence; returns ``(outputs, final_state)``."""
+        state = self.initial_state(u_seq[0]) if state is None else np.asarray(state, float)
+        out = np.empty(len(u_seq))
+        for i, u in enumerate(u_seq):
+            state, out[i] = self.step(state, u)
+        return out, state
+
+    def inverse_step(self, state, v_target: float) -> tuple[np.ndarray, float]:
+        """IH: the input that makes H's output ``v_target`` from ``state``; returns ``(state, u)``.
+
+        ``state`` is H's state; IH runs on swapped memory (its input is H's output), which
+        is what makes the pair exact inverses.
+        """
+        if not np.isfinite(v_target):
+            raise ValueError(f"v_target must be finite, got {v_target}")
+        u_last, s, u0, v0, v_last = (float(x) for x in state)
+        inv_state = np.array([v_last, s, v0, u0, u_last])  # IH's view: input v, output u
+        s_i, v0_i, u0_i = self._update_memory(inv_state, v_target)
+        u = float(self.inverse(v_target, s_i, v0_i, u0_i))
+        return self.step(state, u)[0], u
+
+    def hysteretic_part(self, u_seq, v0_star: float = 0.0) -> np.ndarray:
+        """M[u] of eq. (7) (IH = u + M[u], eq. (6)) from memory ``v0*`` at ``u_seq[0]``."""
+        u_seq = np.asarray(u_seq, float)
+        out = np.empty(len(u_seq))
+        u0, v0, s, u_last, v_last = u_seq[0], v0_star, 1.0, u_seq[0], v0_star
+        for k, u in enumerate(u_seq):
+            if u != u_last:
+                direction = 1.0 if u > u_last else -1.0
+                if direction != s:
+                    u0, v0, s = u_last, v_last, direction
+            m = self.p1 - s * v0
+            v_last = v0 + s * m * (1 - np.exp(-self.p2 * abs(u - u0)))
+            u_last = u
+            out[k] = v_last
+        return out
+
+    def smooth_step(self, eps: float) -> ca.Function:
+        """Smooth H step ``(state, u) -> (state_next, v)``: direction and extremum blended.
+
+        ``t = tanh(Δu/eps)``; the direction moves to ``sign`` by ``t²`` (a standing input keeps
+        it) and the memory (u0, v0) blends to (u_last, v_last) by the reversal weight
+        ``t²·|target − s|/2``; ``|u − u0|`` is ``sqrt((u − u0)² + eps²)``.
+        """
+        if not eps > 0:
+            raise ValueError(f"eps must be > 0, got {eps}")
+        x = ca.SX.sym("state", 5)
+        u = ca.SX.sym("u")
+        u_last, s, u0, v0, v_last = (x[i] for i in range(5))
+        t = ca.tanh((u - u_last) / eps)
+        moved = t * t
+        s_new = s + moved * (t - s)
+        reversal = moved * (1 - t * s) / 2  # 1 when the move reverses the direction
+        u0_new = u0 + reversal * (u_last - u0)
+        v0_new = v0 + reversal * (v_last - v0)
+        m = self.p1 + s_new * (v0_new - u0_new)
+        du = ca.sqrt((u - u0_new) ** 2 + eps**2)
+        v = u - u0_new + v0_new + s_new * (lambertw_expr(self.p2 * m * ca.exp(self.p2 * (m - du))) / self.p2 - m)
+        return ca.Function("parametric_smooth", [x, u], [ca.vertcat(u, s_new, u0_new, v0_new, v), v],
+                           ["state", "u"], ["state_next", "v"])
+
+
+def major_loop(op: ParametricHysteresis, current) -> np.ndarray:
+    """H's response to a major loop 0 -> max -> 0 from the demagnetised state, vectorised.
+
+    Within each monotone half the memory is constant, so eq. (3) applies in closed form:
+    (u0, v0) = (0, 0), s = +1 on the way up, and (i_max, X(i_max)), s = −1 on the way down.
+    """
+    current = np.asarray(current, float)
+    top = int(np.argmax(current))
+    x = np.empty_like(current)
+    x[: top + 1] = op.direct(current[: top + 1], 1.0, current[0], current[0])
+    x[top + 1:] = op.direct(current[top + 1:], -1.0, current[top], x[top])
+    return x
+
+
+def _lut_points(force_up, x_up, window: int):
+    """Ascending (F, X) pairs, averaged over ``window`` samples to tame measurement noise."""
+    n = len(force_up) // window * window
+    if window > 1 and n >= 2 * window:
+        force_up = force_up[:n].reshape(-1, window).mean(axis=1)
+        x_up = x_up[:n].reshape(-1, window).mean(axis=1)
+    order = np.argsort(force_up)
+    return force_up[order], x_up[order]
+
+
+P1_RANGE = (1e-5, 0.1)
+"""Search range of p1 (A) in identification."""
+P2_RANGE = (1e-6, 0.1)
+"""Search range of p2 (1/(A m)) in identification; p2(g) = p2/g."""
+
+
+LOW_FORCE_FRACTION = 0.02
+"""Descending samples below this fraction of the peak force are left out of the cost: with
+F ∝ X², dX/dF is unbounded near F = 0, so force noise there would dominate eq. (13)."""
+
+
+def major_loop_cost(p1: float, p2: float, loops: dict[float, tuple[np.ndarray, np.ndarray]],
+                    window: int = 1) -> float:
+    """J_F(p1, p2), eqs. (13)–(16): the descending branch against the ascending look-up table.
+
+    Parameters
+    ----------
+    p1, p2 : float
+        Operator parameters; the air-gap law p2(g) = p2/g (g in m) applies.
+    loops : dict
+        Per air gap g (m): the current 0 -> max -> 0 (Fig. 9) and the measured force.
+    window : int
+        Samples averaged per look-up-table point (1: the paper's plain table).
+    """
+    total = 0.0
+    for gap, (current, force) in loops.items():
+        current = np.asarray(current, float)
+        force = np.asarray(force, float)
+        top = int(np.argmax(current))
+        x = major_loop(ParametricHysteresis(p1, p2 / gap), current)
+        f_a, x_a = _lut_points(force[: top + 1], x[: top + 1], window)
+        f_d = force[top:]
+        lut = np.interp(f_d, f_a, x_a)  # eq. (15), linear interpolation
+        keep = f_d >= LOW_FORCE_FRACTION * np.max(force)
+        total += float(np.sum((x[top:][keep] - lut[keep]) ** 2))
+    return total if np.isfinite(total) else np.inf
+
+
+def identify_major_loop(loops: dict[float, tuple[np.ndarray, np.ndarray]], p_start=(0.005, 0.002),
+                        window: int = 1):
+    """Identify p1, p2 from major loops at several air gaps (Section 3.5, eq. (17)).
+
+    Nelder–Mead (as the paper) on log p1, log p2 inside :data:`P1_RANGE` and
+    :data:`P2_RANGE`. ``loops[g] = (current, force)``. Returns ``(p1, p2, luts)`` where
+    ``luts[g] = (F, X)`` is the ascending table of eq. (15) for gap g:
+    X = Lut(F, g) and F = Lut⁻¹(X, g).
+    """
+    from scipy.optimize import minimize
+
+    if len(loops) == 0:
+        raise ValueError("need the major loop at one air gap at least")
+    bounds = np.log([P1_RANGE, P2_RANGE])
+
+    def cost(z):
+        if np.any(z < bounds[:, 0]) or np.any(z > bounds[:, 1]):
+            return np.inf
+        return major_loop_cost(float(np.exp(z[0])), float(np.exp(z[1])), loops, window)
+
+    result = minimize(cost, np.log(np.asarray(p_start, float)), method="Nelder-Mead",
+                      options={"xatol": 1e-10, "fatol": 1e-30, "maxiter": 4000, "maxfev": 8000})
+    p1, p2 = (float(v) for v in np.exp(result.x))
+    luts = {}
+    for gap, (current, force) in loops.items():
+        current = np.asarray(current, float)
+        top = int(np.argmax(current))
+        x = major_loop(ParametricHysteresis(p1, p2 / gap), current)
+        luts[gap] = _lut_points(np.asarray(force, float)[: top + 1], x[: top + 1], window)
+    return p1, p2, luts

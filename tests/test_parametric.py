@@ -1,0 +1,156 @@
+"""Lambert W for CasADi, parametric hysteresis operator H / IH, Proposition 3.7, identification."""
+
+import casadi as ca
+import numpy as np
+import pytest
+from scipy.special import lambertw as scipy_lambertw
+
+from models.lambertw import INV_E, lambertw, lambertw_function
+from models.parametric import ParametricHysteresis, identify_major_loop, major_loop
+
+EPS = np.finfo(float).eps
+E_CORE = ParametricHysteresis(p1=0.0071, p2=0.0014 / 1.5e-3)  # katalenic2013 Table 2 at g = 1.5 mm
+
+
+def _grid():
+    return np.concatenate((-INV_E + np.logspace(-9, np.log10(INV_E), 400), np.linspace(-0.3, 10, 400),
+                           np.logspace(1, 6, 400), [0.0]))
+
+
+def test_lambertw_matches_scipy_within_conditioning():
+    """Relative 1e-12, widened only by the conditioning κ = 1/|1+W| near the branch point
+    (κ = 1.4e4 at −1/e + 1e-9: rounding x alone costs ε·κ = 3e-12 there, for any method)."""
+    x = _grid()
+    ref = scipy_lambertw(x).real
+    fun = lambertw_function()
+    w = np.array([float(fun(v)) for v in x])
+    kappa = 1.0 / np.abs(1.0 + ref)
+    rel = np.abs(w - ref) / np.maximum(np.abs(ref), 1e-300)
+    assert np.all(rel <= 1e-12 + 2 * EPS * kappa)
+    far = x > -INV_E + 1e-3
+    assert np.max(rel[far]) <= 1e-12
+    rel_numpy = np.abs(lambertw(x) - ref) / np.maximum(np.abs(ref), 1e-300)  # NumPy twin, same bound
+    assert np.all(rel_numpy <= 1e-12 + 2 * EPS * kappa)
+
+
+def test_lambertw_derivative_matches_closed_form():
+    """W'(x) = W/(x(1+W)); its own conditioning grows like κ², hence the bound."""
+    x = _grid()
+    x = x[x != 0.0]
+    ref = scipy_lambertw(x).real
+    exact = ref / (x * (1.0 + ref))
+    sym = ca.SX.sym("x")
+    dfun = ca.Function("lambertw_derivative", [sym], [ca.jacobian(lambertw_function()(sym), sym)])
+    d = np.array([float(dfun(v)) for v in x])
+    kappa = 1.0 / np.abs(1.0 + ref)
+    rel = np.abs(d - exact) / np.abs(exact)
+    assert np.all(rel <= 1e-12 + 4 * EPS * kappa**2)
+    assert np.max(rel[x > -INV_E + 1e-3]) <= 1e-12
+
+
+def test_lambertw_rejects_out_of_domain():
+    with pytest.raises(ValueError, match="x >= -1/e"):
+        lambertw(-0.5)
+
+
+def _reversing_targets(seed=3, n=3000):
+    rng = np.random.default_rng(seed)
+    return np.abs(np.cumsum(rng.normal(0.0, 0.3, n))) + 0.1
+
+
+def test_direct_of_inverse_is_identity_with_many_reversals():
+    targets = _reversing_targets()
+    state = E_CORE.initial_state(float(targets[0]))
+    inputs = []
+    for v in targets:
+        state, u = E_CORE.inverse_step(state, v)
+        inputs.append(u)
+    out, _ = E_CORE.simulate(np.asarray(inputs), E_CORE.initial_state(float(targets[0])))
+    assert np.sum(np.abs(np.diff(np.sign(np.diff(targets))))) > 1000  # many reversals
+    assert np.max(np.abs(out - targets)) <= 1e-9
+
+
+def test_operators_approach_the_asymptotes():
+    up = np.linspace(0.0, 30.0, 3001)
+    v_up, state = E_CORE.simulate(up)
+    down = np.linspace(30.0, 0.0, 3001)
+    v_down, _ = E_CORE.simulate(down, state)
+    assert v_up[-1] == pytest.approx(up[-1] - E_CORE.p1, abs=1e-9)  # H: v → u − p1 rising
+    assert v_down[-1] == pytest.approx(down[-1] + E_CORE.p1, abs=1e-9)  # and u + p1 falling
+    assert np.all(np.abs(v_up - up) <= E_CORE.p1 + 1e-12)
+    i_up = [E_CORE.inverse(u, 1.0, 0.0, 0.0) for u in up]
+    assert i_up[-1] == pytest.approx(up[-1] + E_CORE.p1, abs=1e-9)  # IH: the mirror asymptote
+
+
+def test_proposition_3_7_scaling_of_the_hysteretic_part():
+    """Eq. (8): a·M_{p1,p2}[b·u] − M_{a·p1, b·p2}[u] → 0 under persistent excitation."""
+    rng = np.random.default_rng(8)
+    u = np.cumsum(rng.choice([-1.0, 1.0], 4000) * rng.uniform(0.05, 0.5, 4000))
+    a, b = 2.5, 0.7
+    base = ParametricHysteresis(0.3, 1.5)
+    scaled = ParametricHysteresis(a * 0.3, b * 1.5)
+    lhs = a * base.hysteretic_part(b * u, v0_star=0.1)
+    rhs = scaled.hysteretic_part(u, v0_star=-0.2)  # different initial memory
+    diff = np.abs(lhs - rhs)
+    assert diff[0] > 0.1
+    assert diff[-100:].max() < 1e-12
+    same = scaled.hysteretic_part(u, v0_star=a * 0.1)  # consistent memory: equal throughout
+    assert np.max(np.abs(lhs - same)) < 1e-12
+
+
+def test_smooth_step_converges_and_has_correct_derivatives():
+    rng = np.random.default_rng(2)
+    u = 3.0 + np.cumsum(rng.normal(0.0, 0.02, 600))
+    exact, _ = E_CORE.simulate(u)
+    errors = []
+    for eps in (1e-3, 1e-4, 1e-5):
+        smooth = E_CORE.smooth_step(eps)
+        st, out = E_CORE.initial_state(float(u[0])), []
+        for v in u:
+            st, y = smooth(st, v)
+            st = np.asarray(st).ravel()
+            out.append(float(y))
+        errors.append(np.max(np.abs(np.asarray(out) - exact)))
+    assert errors[0] > errors[1] > errors[2]
+    assert errors[2] < 1e-4 * E_CORE.p1 * 100  # well below the loop width
+    smooth = E_CORE.smooth_step(1e-3)
+    z = ca.SX.sym("z", 6)
+    nxt, y = smooth(z[:5], z[5])
+    jac = ca.Function("parametric_jacobian", [z], [ca.jacobian(ca.vertcat(nxt, y), z)])
+    fun = ca.Function("parametric_value", [z], [ca.vertcat(nxt, y)])
+    for _ in range(10):
+        point = np.array([3.0, rng.uniform(-1, 1), 2.9, 2.9 + rng.uniform(-0.005, 0.005), 3.0,
+                          3.0 + rng.normal(0, 0.01)])
+        numeric = np.empty((6, 6))
+        for j in range(6):
+            h = 1e-7
+            plus, minus = point.copy(), point.copy()
+            plus[j] += h
+            minus[j] -= h
+            numeric[:, j] = (np.asarray(fun(plus)).ravel() - np.asarray(fun(minus)).ravel()) / (2 * h)
+        np.testing.assert_allclose(np.asarray(jac(point)), numeric, rtol=1e-5, atol=1e-6)
+
+
+def _major_loop_data(p1, p2, gaps, n=801, i_max=7.0):
+    current = np.concatenate((np.linspace(0, i_max, n // 2 + 1), np.linspace(i_max, 0, n // 2 + 1)[1:]))
+    loops = {}
+    for g in gaps:
+        x = major_loop(ParametricHysteresis(p1, p2 / g), current)
+        loops[g] = (current, 9.67 * (1.5e-3 / g) ** 2 * x**2 * (1 - 0.02 * x))  # a monotone static map
+    return loops
+
+
+def test_identification_recovers_known_parameters_from_noise_free_data():
+    loops = _major_loop_data(0.0071, 0.0014, [1.2e-3, 1.5e-3, 1.75e-3])
+    p1, p2, luts = identify_major_loop(loops)
+    assert p1 == pytest.approx(0.0071, rel=2e-3)
+    assert p2 == pytest.approx(0.0014, rel=2e-3)
+    f_tab, x_tab = luts[1.5e-3]
+    assert np.all(np.diff(f_tab) >= 0) and len(f_tab) == len(x_tab)
+
+
+@pytest.mark.parametrize("kwargs, match", [({"p1": 0.0, "p2": 1.0}, "p1 must be"),
+                                           ({"p1": 1.0, "p2": float("nan")}, "p2 must be")])
+def test_parameter_validation(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        ParametricHysteresis(**kwargs)
