@@ -21,11 +21,12 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from models.base import SteppedModel
 from models.smooth import smooth_clip
 
 
 @dataclass(frozen=True)
-class MaxwellSlip:
+class MaxwellSlip(SteppedModel):
     """Maxwell-slip hysteresis: parallel elasto-slide elements."""
 
     k: tuple[float, ...]
@@ -83,14 +84,6 @@ class MaxwellSlip:
         w = np.asarray(self.w)
         forces = np.clip(state[1:] + k * (u - state[0]), -w, w)
         return np.concatenate(([u], forces)), float(forces.sum())
-
-    def simulate(self, u_seq, state=None) -> tuple[np.ndarray, np.ndarray]:
-        """Exact response to an input sequence; returns ``(outputs, final_state)``."""
-        state = self.initial_state(u_seq[0]) if state is None else np.asarray(state, float)
-        out = np.empty(len(u_seq))
-        for i, u in enumerate(u_seq):
-            state, out[i] = self.step(state, u)
-        return out, state
 
     def smooth_forces(self, forces, u_from, u_to, eps: float):
         """Element forces after moving the input ``u_from -> u_to``, with ``clip`` smoothed.

@@ -20,11 +20,12 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from models.base import SteppedModel
 from models.lambertw import lambertw, lambertw_expr
 
 
 @dataclass(frozen=True)
-class ParametricHysteresis:
+class ParametricHysteresis(SteppedModel):
     """Direct operator H (eq. (3)); :meth:`inverse_step` is IH (eq. (5))."""
 
     p1: float
@@ -80,14 +81,6 @@ class ParametricHysteresis:
         s, u0, v0 = self._update_memory(state, u)
         v = float(self.direct(u, s, u0, v0))
         return np.array([u, s, u0, v0, v]), v
-
-    def simulate(self, u_seq, state=None) -> tuple[np.ndarray, np.ndarray]:
-        """Exact response of H to a sequence; returns ``(outputs, final_state)``."""
-        state = self.initial_state(u_seq[0]) if state is None else np.asarray(state, float)
-        out = np.empty(len(u_seq))
-        for i, u in enumerate(u_seq):
-            state, out[i] = self.step(state, u)
-        return out, state
 
     def inverse_step(self, state, v_target: float) -> tuple[np.ndarray, float]:
         """IH: the input that makes H's output ``v_target`` from ``state``; returns ``(state, u)``.

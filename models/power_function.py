@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from models.base import SteppedModel
 from models.smooth import smooth_max, smooth_min
 
 # zhou2024 Table V: (s, τ [N m]); s in the paper's scaled units (see VirtualDeformation).
@@ -65,7 +66,7 @@ def _exact_relu(x):
 
 
 @dataclass(frozen=True)
-class PowerFunctionHysteresis:
+class PowerFunctionHysteresis(SteppedModel):
     """zhou2024's power-function hysteresis model; defaults are Tables V–VII."""
 
     ascending: tuple[tuple[float, float], ...] = tuple(TABLE_V[p] for p in ASCENDING_POINTS)
@@ -179,14 +180,6 @@ class PowerFunctionHysteresis:
         else:
             tau = self._down_branch(s, s01, s02, tau_r)
         return np.array([s, up, s01, s02, tau_r, tau]), tau
-
-    def simulate(self, s_seq, state=None) -> tuple[np.ndarray, np.ndarray]:
-        """Exact response to a sequence of s; returns ``(torques, final_state)``."""
-        state = self.initial_state(s_seq[0]) if state is None else np.asarray(state, float)
-        out = np.empty(len(s_seq))
-        for i, s in enumerate(s_seq):
-            state, out[i] = self.step(state, s)
-        return out, state
 
     def inverse_step(self, state, tau: float) -> tuple[np.ndarray, float]:
         """The s that brings the torque to ``tau`` from ``state`` (eqs. (20)–(31)), and the new state.
