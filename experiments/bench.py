@@ -34,6 +34,8 @@ class Scenario:
     """Length of the run (s)."""
     reference: Callable[[np.ndarray], np.ndarray]
     """Reference as a function of time (vectorised)."""
+    conditions: tuple[str, ...] = ()
+    """Operating conditions the scenario fixes, as ``--set`` assignments (``rig.gap_mm=1.2``)."""
 
 
 @dataclass(frozen=True)

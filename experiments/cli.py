@@ -15,7 +15,7 @@ from pathlib import Path
 
 from experiments.bench import Bench
 from experiments.benches import BENCH_NAMES, DEFAULT_BENCH, get_bench
-from experiments.config import apply_overrides, describe
+from experiments.config import apply_overrides
 from experiments.reference import load_reference
 from experiments.report import comparison_table, results_document, write_json, write_run_csv
 from experiments.runner import RunResult, simulate
@@ -98,6 +98,13 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
         raise UsageError("--reference replaces one scenario's reference: name exactly one scenario")
     config = _config(bench, args.overrides)
     scenarios = [_scenario(bench, s, args.reference) for s in scenario_names]
+    user_keys = {o.split("=", 1)[0].strip() for o in args.overrides}
+    for scenario in scenarios:
+        for condition in scenario.conditions:
+            key = condition.split("=", 1)[0]
+            if key in user_keys:
+                raise UsageError(f"--set {key} conflicts with scenario {scenario.name!r}, which fixes "
+                                 f"{condition}; use --reference for other conditions")
     out = Path(args.out) if args.out else Path("results") / bench.name / dt.datetime.now(
         dt.UTC).strftime("%Y%m%dT%H%M%SZ")
     total = sum(int(round((args.duration or s.duration) / bench.sample_period)) for s in scenarios) * len(controllers)
@@ -110,7 +117,6 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
                 bar.set_description(f"{scenario.name} · {controller}")
                 run = simulate(bench, scenario, controller, config, seed=args.seed,
                                duration=args.duration, progress=bar.update)
-                run.parameters = describe(config)
                 runs.append(run)
                 write_run_csv(run, out)
     doc = results_document(bench, runs, command=sys.argv[1:] if sys.argv else None)

@@ -72,6 +72,9 @@ def simulate(bench: Bench, scenario: Scenario, controller_name: str, config: dic
     """
     if controller_name not in bench.controllers:
         raise ValueError(f"unknown controller {controller_name!r}; allowed: {', '.join(bench.controllers)}")
+    if scenario.conditions:
+        from experiments.config import apply_overrides
+        config = apply_overrides(config, list(scenario.conditions))
     dt = bench.sample_period
     t, ref = reference_samples(scenario, dt, duration)
     plant = bench.make_plant(config)
@@ -105,4 +108,10 @@ def simulate(bench: Bench, scenario: Scenario, controller_name: str, config: dic
     return RunResult(bench=bench.name, scenario=scenario.name, controller=controller_name, seed=seed,
                      units=bench.units, sample_period=dt, t=t, reference=ref, output=out, input=u_hist,
                      predicted=pred, truth={k: np.asarray(v) for k, v in truth.items()},
-                     step_times=step_times, metrics=metrics, solver=controller.stats())
+                     step_times=step_times, metrics=metrics, solver=controller.stats(),
+                     parameters=_describe(config))
+
+
+def _describe(config):
+    from experiments.config import describe
+    return describe(config)

@@ -87,6 +87,9 @@ class ReluctanceActuator:
     params: ReluctanceParams = field(default_factory=ReluctanceParams)
     gap: float = 1.5e-3
     """Air gap (m), held by the test rig's position loops."""
+    noisy: bool = False
+    """Add the force-measurement noise (identification runs); off in operation, where force
+    is not measured and the metrics use the true force."""
 
     def __post_init__(self):
         if not 0.5e-3 <= self.gap <= 3e-3:
@@ -124,7 +127,8 @@ class ReluctanceActuator:
 
     def _measure(self) -> Measurement:
         force = float(static_force(self.params, self.hysteresis.output(self._hys), self.gap))
-        return Measurement(t=0.0, y=force + self.params.force_noise * float(self._rng.standard_normal()),
+        noise = self.params.force_noise * float(self._rng.standard_normal()) if self.noisy else 0.0
+        return Measurement(t=0.0, y=force + noise,
                            sensors={"current": self._current},
                            truth={"force": force, "current": self._current})
 
@@ -140,7 +144,7 @@ def major_loop_measurement(p: ReluctanceParams, gap: float, force_max: float, du
     i_max = float(np.interp(force_max, static_force(p, grid, gap), grid))
     n = int(round(duration / p.sample_period)) // 2
     current = np.concatenate((np.linspace(0.0, i_max, n + 1), np.linspace(i_max, 0.0, n + 1)[1:]))
-    plant = ReluctanceActuator(p, gap)
+    plant = ReluctanceActuator(p, gap, noisy=True)
     plant.reset(seed)
     forces = []
     for i in current:  # slow ramps: the amplifier follows exactly

@@ -26,7 +26,8 @@ def _csv(tmp_path, text, name="ref.csv"):
     (["run", "pam", "nosuch", "--controller", "nmpc"],
      "unknown scenario 'nosuch'; allowed: square-10, square-20, square-30, square-40, sine-30"),
     (["run", "pam", "square-10", "--controller", "lqr"], "unknown controller 'lqr'; allowed: pi, pi-hc, nmpc"),
-    (["run", "nosuch", "square-10", "--controller", "pi"], "unknown bench 'nosuch'; allowed: pam, compliant"),
+    (["run", "nosuch", "square-10", "--controller", "pi"],
+     "unknown bench 'nosuch'; allowed: pam, compliant, reluctance"),
     (["compare", "pam", "--controllers", "pi,lqr"], "unknown controller 'lqr'"),
     (["run", "pam", "square-10", "--controller", "pi", "--set", "nmpc.nosuch=3"],
      "unknown --set key 'nmpc.nosuch'; allowed: plant.payload_kg"),
@@ -111,6 +112,13 @@ def test_list_json(capsys):
     assert info["benches"]["pam"]["controllers"] == ["pi", "pi-hc", "nmpc"]
     assert info["benches"]["compliant"]["controllers"] == ["pid", "inverse-ff-pid", "nmpc"]
     assert "ipopt" in info["solvers"]
+
+
+def test_scenario_conditions_cannot_be_overridden(capsys):
+    code, _, err = _run(capsys, ["run", "reluctance", "ramp-1.2mm", "--controller", "hyst-inverse",
+                                 "--set", "rig.gap_mm=1.4"])
+    assert code == 2
+    assert "--set rig.gap_mm conflicts with scenario 'ramp-1.2mm', which fixes rig.gap_mm=1.2" in err
 
 
 def test_module_entry_point_exit_code():

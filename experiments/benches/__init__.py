@@ -15,7 +15,12 @@ def _compliant() -> Bench:
     return BENCH
 
 
-_FACTORIES = {"pam": _pam, "compliant": _compliant}
+def _reluctance() -> Bench:
+    from experiments.benches.reluctance import BENCH
+    return BENCH
+
+
+_FACTORIES = {"pam": _pam, "compliant": _compliant, "reluctance": _reluctance}
 BENCH_NAMES = tuple(_FACTORIES)
 DEFAULT_BENCH = "pam"
 
