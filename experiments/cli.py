@@ -1,4 +1,4 @@
-"""``hystmpc`` command line (interface.md): list, run, compare.
+"""``hystmpc`` command line (interface.md): list, run, compare, identify.
 
 Exit codes: 0 success; 2 bad usage or bad input, with one line naming what is wrong and
 what is allowed; 1 anything else.
@@ -59,7 +59,37 @@ def build_parser() -> argparse.ArgumentParser:
     p_cmp.add_argument("scenarios", nargs="*", help="default: all of the bench's scenarios")
     p_cmp.add_argument("--controllers", help="comma-separated (default: all of the bench's)")
     _add_run_options(p_cmp)
+    p_id = sub.add_parser("identify", help="identify a bench's model from simulated measurements")
+    p_id.add_argument("bench", help="a bench with an identification step (reluctance)")
+    p_id.add_argument("--out", default="identified.json", help="file for the identified model (JSON)")
+    p_id.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                      help="parameter override, e.g. rig.core=C or identification.seed=3")
+    p_id.add_argument("--quiet", action="store_true", help="print nothing but errors")
     return parser
+
+
+IDENTIFIABLE = ("reluctance",)
+
+
+def _identify(args) -> int:
+    if args.bench not in IDENTIFIABLE:
+        _bench(args.bench)  # unknown bench: its own error
+        raise UsageError(f"bench {args.bench!r} has no identification step; benches with one: "
+                         f"{', '.join(IDENTIFIABLE)}")
+    bench = _bench(args.bench)
+    config = _config(bench, args.overrides)
+    from experiments.benches.reluctance import identified_document
+    from experiments.report import version
+    doc = identified_document(config)
+    doc["version"] = version()
+    doc["overrides"] = list(args.overrides)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(doc, indent=1) + "\n")
+    if not args.quiet:
+        print(f"core {doc['core']}: p1 = {doc['p1_A']:.5f} A (plant {doc['true_p1_A']:.5f}), "
+              f"p2 = {doc['p2_per_A_m']:.5f} 1/(A m) (plant {doc['true_p2_per_A_m']:.5f}); written to {out}")
+    return 0
 
 
 def _bench(name: str) -> Bench:
@@ -169,6 +199,8 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
         if args.command == "list":
             return _list(args)
+        if args.command == "identify":
+            return _identify(args)
         bench = _bench(args.bench)
         if args.command == "run":
             _check_names("scenario", [args.scenario], bench.scenarios)

@@ -22,6 +22,7 @@ import numpy as np
 
 from models.base import SteppedModel
 from models.lambertw import lambertw, lambertw_expr
+from models.smooth import smooth_max, smooth_min
 
 
 @dataclass(frozen=True)
@@ -130,7 +131,10 @@ class ParametricHysteresis(SteppedModel):
         reversal = moved * (1 - t * s) / 2  # 1 when the move reverses the direction
         u0_new = u0 + reversal * (u_last - u0)
         v0_new = v0 + reversal * (v_last - v0)
+        # m lies in [0, 2 p1] for any state inside the asymptotes; clamping it (smoothly)
+        # keeps the Lambert W argument positive on every NLP iterate, so no NaN.
         m = self.p1 + s_new * (v0_new - u0_new)
+        m = smooth_min(smooth_max(m, 1e-3 * self.p1, 1e-3 * self.p1), 2 * self.p1, 1e-3 * self.p1)
         du = ca.sqrt((u - u0_new) ** 2 + eps**2)
         v = u - u0_new + v0_new + s_new * (lambertw_expr(self.p2 * m * ca.exp(self.p2 * (m - du))) / self.p2 - m)
         return ca.Function("parametric_smooth", [x, u], [ca.vertcat(u, s_new, u0_new, v0_new, v), v],

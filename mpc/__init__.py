@@ -8,9 +8,9 @@
 """
 
 from mpc.controller import NmpcController
-from mpc.estimator import DisturbanceEKF
+from mpc.estimator import DisturbanceEKF, OpenLoopEstimator
 from mpc.model import PredictionModel
 from mpc.nmpc import SOLVERS, Nmpc, NmpcSettings, NmpcStep
 
-__all__ = ["SOLVERS", "DisturbanceEKF", "Nmpc", "NmpcController", "NmpcSettings", "NmpcStep",
+__all__ = ["SOLVERS", "DisturbanceEKF", "OpenLoopEstimator", "Nmpc", "NmpcController", "NmpcSettings", "NmpcStep",
            "PredictionModel"]

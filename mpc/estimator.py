@@ -67,3 +67,33 @@ class DisturbanceEKF:
         I_KC = np.eye(len(z)) - K @ C
         self.P = I_KC @ self.P @ I_KC.T + K @ self.R @ K.T  # Joseph form: stays symmetric PSD
         self.x, self.d = z[: self.model.nx], z[self.model.nx:]
+
+
+class OpenLoopEstimator:
+    """For feed-forward control (no sensor): the state follows a model under the applied inputs.
+
+    Parameters
+    ----------
+    step : callable
+        ``(x, u) -> x_next``, typically the *exact* model, so the NMPC re-anchors its smooth
+        prediction on the exact memory every sample.
+    nd : int
+        Size of the (always zero) disturbance vector the NMPC expects.
+    """
+
+    def __init__(self, step, nd: int = 1):
+        self._step = step
+        self.x = np.zeros(0)
+        self.d = np.zeros(nd)
+
+    def reset(self, x0, d0, P0=None) -> None:
+        """Set the state; the disturbance stays zero (nothing measures it)."""
+        self.x = np.asarray(x0, float).copy()
+        self.d = np.zeros_like(np.asarray(d0, float))
+
+    def predict(self, u) -> None:
+        """Propagate with the applied input."""
+        self.x = np.asarray(self._step(self.x, float(np.ravel(u)[0])), float)
+
+    def update(self, z) -> None:
+        """No measurement: nothing to do."""

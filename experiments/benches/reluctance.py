@@ -17,10 +17,13 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass
 
+import casadi as ca
 import numpy as np
 
-from experiments.bench import Bench, ControllerSpec, Scenario
+from experiments.bench import Bench, ControllerSpec, NmpcAdapter, Scenario
 from models.parametric import ParametricHysteresis, identify_major_loop
+from models.smooth import smooth_max
+from mpc import Nmpc, NmpcController, NmpcSettings, OpenLoopEstimator, PredictionModel
 from plants.base import Measurement
 from plants.reluctance import C_CORE, ReluctanceActuator, ReluctanceParams, major_loop_measurement
 
@@ -141,6 +144,22 @@ def identify(plant: ReluctanceParams, settings: IdentificationSettings, force_ma
     return IdentifiedModel(p1, p2, gaps, tuple(tables), poly)
 
 
+def identified_document(config) -> dict:
+    """The identified model of the configured core as a JSON-ready dict (``hystmpc identify``)."""
+    model = identified_model(config)
+    plant, _, force_max = _rig(config)
+    return {
+        "schema": "hystmpc.identified/1", "bench": "reluctance", "core": config["rig"].core,
+        "p1_A": model.p1, "p2_per_A_m": model.p2,
+        "true_p1_A": plant.p1, "true_p2_per_A_m": plant.p2,
+        "gaps_m": list(model.gaps),
+        "tables": [{"gap_m": g, "force_N": f.tolist(), "x_A": x.tolist()}
+                   for g, (f, x) in zip(model.gaps, model.tables, strict=True)],
+        "poly_inverse": {"features": "sqrt(F)^a * (g/1mm)^b, a+b<=4, a outer", "coefficients": model.poly.tolist()},
+        "force_max_N": force_max,
+    }
+
+
 def _rig(config) -> tuple[ReluctanceParams, float, float]:
     rig: RigSettings = config["rig"]
     plant = config["ecore"] if rig.core == "E" else config["ccore"]
@@ -213,6 +232,64 @@ def _build(kind: str):
     return build
 
 
+def force_table(model: IdentifiedModel, gap: float) -> tuple[np.ndarray, np.ndarray]:
+    """(X, F) points of Lut⁻¹ at ``gap``: the identified table, interpolated between gaps."""
+    a, b, w = model._neighbours(gap)
+    x_pts = np.unique(np.concatenate((model.tables[a][1], model.tables[b][1])))
+    return x_pts, model.force_of_x(x_pts, gap)
+
+
+def prediction_model(model: IdentifiedModel, gap: float, eps: float, kink_eps: float = 1e-4) -> PredictionModel:
+    """F = Lut⁻¹(H[i], g), eq. (12b), with the smooth H and the table as a smooth polyline."""
+    op = model.operator(gap)
+    smooth = op.smooth_step(eps)
+    x = ca.SX.sym("x", 5)
+    u = ca.SX.sym("u")
+    d = ca.SX.sym("d")
+    x_next, _ = smooth(x, u)
+    xs, fs = force_table(model, gap)
+    keep = np.concatenate(([True], np.diff(xs) > 1e-6))
+    xs, fs = xs[keep], fs[keep]
+    slopes = np.diff(fs) / np.diff(xs)
+
+    def lut_inverse(v):
+        value = fs[0] + slopes[0] * (v - xs[0])
+        for k in range(1, len(slopes)):
+            value = value + (slopes[k] - slopes[k - 1]) * smooth_max(v - xs[k], 0.0, kink_eps)
+        return value
+
+    force = lut_inverse(x[4])
+    names = ("current_last", "direction", "current_at_extremum", "x_at_extremum", "x")
+    return PredictionModel(
+        step=ca.Function("reluctance_step", [x, u, d], [x_next], ["x", "u", "d"], ["x_next"]),
+        output=ca.Function("reluctance_output", [x, d], [force], ["x", "d"], ["y"]),
+        measure=ca.Function("reluctance_measure", [x, d], [force], ["x", "d"], ["z"]),
+        sample_period=ReluctanceParams().sample_period,
+        state_names=names,
+    )
+
+
+def build_nmpc(config) -> NmpcAdapter:
+    """Feed-forward NMPC: the exact H re-anchors the smooth prediction every sample."""
+    plant, gap, _ = _rig(config)
+    model = identified_model(config)
+    settings: NmpcSettings = config["nmpc"]
+    op = model.operator(gap)
+    pm = prediction_model(model, gap, settings.eps)
+    nmpc = Nmpc(pm, settings, 0.0, plant.current_limit, plant.slew_limit * plant.sample_period)
+    estimator = OpenLoopEstimator(lambda x, u: op.step(x, u)[0])
+
+    def inverse(x, d, refs):
+        state, out = np.asarray(x, float), np.empty(len(refs))
+        for j, r in enumerate(refs):
+            state, out[j] = op.inverse_step(state, float(model.x_of_force(max(float(r), 0.0), gap)))
+        return out
+
+    controller = NmpcController(nmpc, estimator, lambda z: op.initial_state(0.0), inverse, [0.0] * 6,
+                                jump_threshold=20.0)
+    return NmpcAdapter(controller, lambda m: np.zeros(0))
+
+
 def _smooth_path(waypoints, segment: float):
     """Raised-cosine moves through ``waypoints`` (N), ``segment`` seconds each."""
     waypoints = np.asarray(waypoints, float)
@@ -251,7 +328,8 @@ def _scenarios() -> dict[str, Scenario]:
 
 def _defaults() -> dict:
     return {"rig": RigSettings(), "ecore": ReluctanceParams(), "ccore": C_CORE,
-            "identification": IdentificationSettings()}
+            "identification": IdentificationSettings(),
+            "nmpc": NmpcSettings(horizon=16, q_output=1.0, r_rate=1.0, eps=1e-5, solver="sqp", max_iter=20)}
 
 
 def _plant(config):
@@ -272,6 +350,8 @@ BENCH = Bench(
         "poly-inverse": ControllerSpec("poly-inverse", "single-valued 4th-order polynomial inverse",
                                        _build("poly")),
         "hyst-inverse": ControllerSpec("hyst-inverse", "IH[Lut(F, g)], eq. (12a), Fig. 10", _build("hyst")),
+        "nmpc": ControllerSpec("nmpc", "feed-forward NMPC: currents over a horizon, slew limit, F = Lut⁻¹(H[i])",
+                               build_nmpc),
     },
     defaults=_defaults,
     make_plant=_plant,
