@@ -71,6 +71,8 @@ class Bench:
     loop: tuple[str, str, str, str] | None = None
     """Hysteresis-loop plot: (truth key on x, truth key on y, x label, y label)."""
     default_scenario: str = ""
+    error_vs_reference: bool = False
+    """Also plot the error against the reference (katalenic2013 Figs. 11–13 style)."""
 
 
 class NmpcAdapter:

@@ -157,10 +157,12 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
     (out / "table.md").write_text(table + "\n")
     figures = []
     if not args.no_plots:
-        from experiments.plots import rmse_figure, scenario_figure
+        from experiments.plots import error_vs_reference_figure, rmse_figure, scenario_figure
         for scenario in scenarios:
             subset = [r for r in runs if r.scenario == scenario.name]
             figures.append(scenario_figure(bench, subset, out / f"{scenario.name}.png"))
+            if bench.error_vs_reference:
+                figures.append(error_vs_reference_figure(bench, subset, out / f"{scenario.name}_error.png"))
         if len(runs) > 1:
             figures.append(rmse_figure(bench, runs, out / "rmse.png"))
     if not args.quiet:

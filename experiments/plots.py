@@ -61,3 +61,21 @@ def rmse_figure(bench: Bench, runs: list[RunResult], path: str | Path) -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def error_vs_reference_figure(bench: Bench, runs: list[RunResult], path: str | Path) -> Path:
+    """Error against the reference (linearisation error vs force, like katalenic2013 Fig. 11)."""
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for r in runs:
+        ax.plot(r.reference, r.reference - r.output, lw=0.8,
+                label=f"{r.controller} (max {r.metrics['max_abs_error']:.3g})")
+    ax.axhline(0, color="k", lw=0.5)
+    ax.set(xlabel=f"reference {bench.output_name} [{bench.units}]", ylabel=f"error [{bench.units}]",
+           title=f"{runs[0].scenario}: error vs reference")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

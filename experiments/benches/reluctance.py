@@ -173,9 +173,12 @@ def identified_model(config) -> IdentifiedModel:
 
 
 class PolyInverse:
-    """Feed-forward through the single-valued polynomial (the paper's baseline, Fig. 5b)."""
+    """Feed-forward through the single-valued polynomial (the paper's baseline, Fig. 5b).
 
-    horizon = 0
+    Like every feed-forward here it commands the force wanted when the current takes
+    effect, one sample ahead (``horizon = 1``); otherwise it would lag by one sample."""
+
+    horizon = 1
 
     def __init__(self, model: IdentifiedModel, gap: float, current_limit: float):
         self.model, self.gap, self.limit = model, gap, current_limit
@@ -186,7 +189,7 @@ class PolyInverse:
 
     def step(self, measurement: Measurement, ref_window) -> float:
         """Current for the reference force."""
-        return float(np.clip(self.model.poly_current(float(ref_window[0]), self.gap)[0], 0.0, self.limit))
+        return float(np.clip(self.model.poly_current(float(ref_window[1]), self.gap)[0], 0.0, self.limit))
 
     def stats(self) -> None:
         return None
@@ -194,9 +197,10 @@ class PolyInverse:
 
 class HystInverse:
     """i = IH[Lut(F_ref, g)] (eq. (12a)); the command is rate-limited to the slew limit and the
-    operator's memory follows the current actually commanded."""
+    operator's memory follows the current actually commanded. Targets the next sample's
+    reference (``horizon = 1``), as :class:`PolyInverse`."""
 
-    horizon = 0
+    horizon = 1
 
     def __init__(self, model: IdentifiedModel, gap: float, current_limit: float, slew_per_sample: float):
         self.model, self.gap, self.limit, self.slew = model, gap, current_limit, slew_per_sample
@@ -210,7 +214,7 @@ class HystInverse:
 
     def step(self, measurement: Measurement, ref_window) -> float:
         """Current for the reference force."""
-        x_target = float(self.model.x_of_force(max(float(ref_window[0]), 0.0), self.gap))
+        x_target = float(self.model.x_of_force(max(float(ref_window[1]), 0.0), self.gap))
         last = float(self._state[0])
         _, wanted = self.op.inverse_step(self._state, x_target)
         current = float(np.clip(wanted, max(0.0, last - self.slew), min(self.limit, last + self.slew)))
@@ -329,7 +333,7 @@ def _scenarios() -> dict[str, Scenario]:
 def _defaults() -> dict:
     return {"rig": RigSettings(), "ecore": ReluctanceParams(), "ccore": C_CORE,
             "identification": IdentificationSettings(),
-            "nmpc": NmpcSettings(horizon=16, q_output=1.0, r_rate=1.0, eps=1e-5, solver="sqp", max_iter=20)}
+            "nmpc": NmpcSettings(horizon=16, q_output=1.0, r_rate=1.0, eps=1e-5, solver="sqp", max_iter=50)}
 
 
 def _plant(config):
@@ -359,4 +363,5 @@ BENCH = Bench(
     input_bounds=(0.0, ReluctanceParams().current_limit),
     loop=("current", "force", "current [A]", "force [N]"),
     default_scenario="ramp-1.5mm",
+    error_vs_reference=True,
 )
