@@ -4,10 +4,12 @@ Force is not measured in operation: all three controllers are feed-forward and u
 model identified from simulated, noisy major-loop measurements (Section 3.5), never the
 plant's true parameters.
 
-* ``poly-inverse``: a single-valued 4th-order polynomial i(F) per air gap, fitted to both
-  branches of the identification data (in √F, since F ∝ i²);
+* ``poly-inverse``: one single-valued 4th-order polynomial i(√F, g) over all air gaps,
+  fitted to both branches of the identification data (√F since F ∝ i²; ref. [2] of the paper);
 * ``hyst-inverse``: i = IH[Lut(F_ref, g)] (eq. (12a), Fig. 10), its command rate-limited to
   the amplifier's slew limit;
+
+Both inverses command the force wanted at the next sample, when their current takes effect.
 * ``nmpc``: currents over a horizon within the current bounds and slew limit, predicting
   F = Lut⁻¹(H[i], g) (eq. (12b)) with the smooth H.
 """
