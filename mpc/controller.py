@@ -90,13 +90,20 @@ class NmpcController:
             self._plan = None
         x, d = est.x, est.d
         refs = ref_window[1:]
-        u_inv = np.clip(np.asarray(self.inverse(x, d, refs), float).ravel(),
-                        self.nmpc.u_min, self.nmpc.u_max)
+        cache = []
+
+        def u_inv():  # the inverse model is only needed for warm starts, fallbacks and r_input
+            if not cache:
+                cache.append(np.clip(np.asarray(self.inverse(x, d, refs), float).ravel(),
+                                     self.nmpc.u_min, self.nmpc.u_max))
+            return cache[0]
+
         jump = (self._last_ref_end is not None
                 and abs(refs[-1] - self._last_ref_end) > self.jump_threshold)
         self._last_ref_end = refs[-1]
         u_guess, x_guess = self._initial_guess(u_inv, jump, x, d)
-        result = self.nmpc.solve(x, d, self._u_last, refs, u_guess, x_guess, u_ff=u_inv)
+        u_ff = u_inv() if self.settings.r_input > 0 else np.zeros(N)  # zero weight: value unused
+        result = self.nmpc.solve(x, d, self._u_last, refs, u_guess, x_guess, u_ff=u_ff)
         self.iterations.append(result.iterations)
         self.statuses[result.status] = self.statuses.get(result.status, 0) + 1
         if result.success:
@@ -108,10 +115,10 @@ class NmpcController:
             if self._plan is not None:
                 u = float(self._plan.u_plan[min(1, N - 1), 0])
             else:
-                u = float(u_inv[0])
+                u = float(u_inv()[0])
             self._plan = None
         if not np.isfinite(u):  # never send NaN to an actuator
-            u = float(u_inv[0]) if np.isfinite(u_inv[0]) else self._u_last
+            u = float(u_inv()[0]) if np.isfinite(u_inv()[0]) else self._u_last
         u = float(np.clip(u, self._u_last - self.nmpc.du_max, self._u_last + self.nmpc.du_max))
         u = float(np.clip(u, self.nmpc.u_min, self.nmpc.u_max))
         self._u_last = u
@@ -126,7 +133,7 @@ class NmpcController:
         reinit = self._plan is None or jump
         if reinit and mode == "inverse":
             self.reinitialisations += 1
-            return u_inv, None
+            return u_inv(), None
         if self._plan is None:
             return np.full(N, self._u_last), None
         u_prev = self._plan.u_plan[:, 0]
