@@ -59,3 +59,27 @@ class Pid:
             self._integral = integral
         return float(np.clip(feedforward + g.kp * error + self._integral + g.kd * self._derivative,
                              self.lo, self.hi))
+
+
+class Replay:
+    """Plays a precomputed input sequence open loop (offline optima; not a controller)."""
+
+    horizon = 0
+
+    def __init__(self, inputs):
+        self.inputs = np.asarray(inputs, float)
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to the first input."""
+        self._k = 0
+        self.predicted_output = float("nan")
+
+    def step(self, measurement, ref_window) -> float:
+        """The next input of the sequence (the last one once it runs out)."""
+        u = float(self.inputs[min(self._k, len(self.inputs) - 1)])
+        self._k += 1
+        return u
+
+    def stats(self) -> None:
+        return None

@@ -245,6 +245,21 @@ def force_table(model: IdentifiedModel, gap: float) -> tuple[np.ndarray, np.ndar
     return x_pts, model.force_of_x(x_pts, gap)
 
 
+def smooth_force_of_x(model: IdentifiedModel, gap: float, kink_eps: float = 1e-4):
+    """Lut⁻¹(X, g) as a polyline whose kinks are rounded over ``kink_eps`` (for CasADi)."""
+    xs, fs = force_table(model, gap)
+    keep = np.concatenate(([True], np.diff(xs) > 1e-6))
+    xs, fs = xs[keep], fs[keep]
+    slopes = np.diff(fs) / np.diff(xs)
+
+    def force(v):
+        value = fs[0] + slopes[0] * (v - xs[0])
+        for k in range(1, len(slopes)):
+            value = value + (slopes[k] - slopes[k - 1]) * smooth_max(v - xs[k], 0.0, kink_eps)
+        return value
+    return force
+
+
 def prediction_model(model: IdentifiedModel, gap: float, eps: float, kink_eps: float = 1e-4) -> PredictionModel:
     """F = Lut⁻¹(H[i], g), eq. (12b), with the smooth H and the table as a smooth polyline."""
     op = model.operator(gap)
@@ -253,18 +268,8 @@ def prediction_model(model: IdentifiedModel, gap: float, eps: float, kink_eps: f
     u = ca.SX.sym("u")
     d = ca.SX.sym("d")
     x_next, _ = smooth(x, u)
-    xs, fs = force_table(model, gap)
-    keep = np.concatenate(([True], np.diff(xs) > 1e-6))
-    xs, fs = xs[keep], fs[keep]
-    slopes = np.diff(fs) / np.diff(xs)
 
-    def lut_inverse(v):
-        value = fs[0] + slopes[0] * (v - xs[0])
-        for k in range(1, len(slopes)):
-            value = value + (slopes[k] - slopes[k - 1]) * smooth_max(v - xs[k], 0.0, kink_eps)
-        return value
-
-    force = lut_inverse(x[4])
+    force = smooth_force_of_x(model, gap, kink_eps)(x[4])
     names = ("current_last", "direction", "current_at_extremum", "x_at_extremum", "x")
     return PredictionModel(
         step=ca.Function("reluctance_step", [x, u, d], [x_next], ["x", "u", "d"], ["x_next"]),
@@ -294,6 +299,58 @@ def build_nmpc(config) -> NmpcAdapter:
     controller = NmpcController(nmpc, estimator, lambda z: op.initial_state(0.0), inverse, [0.0] * 6,
                                 jump_threshold=20.0)
     return NmpcAdapter(controller, lambda m: np.zeros(0))
+
+
+def offline_optimum(config, reference: np.ndarray) -> np.ndarray:
+    """Best slew-limited currents for a whole reference, known in advance (a lower bound).
+
+    Minimises Σ_k (F_{k+1} − r_{k+1})² over the full run under the current bounds and slew
+    limit, with the identified model: F = Lut⁻¹(X, g) and X = H[i]. The NLP is posed in X
+    (the hysteresis-free static part, solved by IPOPT), then the exact inverse IH turns X
+    into currents; H moves X from i by less than p1, so the slew limit holds to within p1
+    (the plant's amplifier enforces it exactly). No causal controller, with any horizon, can
+    do better on this model than this sequence.
+
+    Parameters
+    ----------
+    config : dict
+        Bench configuration with the scenario's conditions applied.
+    reference : ndarray, shape (n,)
+        Force reference at each sample (N).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        Current commanded at each sample (A).
+    """
+    plant, gap, _ = _rig(config)
+    model = identified_model(config)
+    slew = plant.slew_limit * plant.sample_period
+    ref = np.asarray(reference, float)
+    n = len(ref)
+    force = smooth_force_of_x(model, gap)
+    opti = ca.Opti()
+    x = opti.variable(n)
+    opti.subject_to(opti.bounded(-slew, x - ca.vertcat(0.0, x[:-1]), slew))
+    opti.subject_to(opti.bounded(0.0, x, plant.current_limit))
+    target = np.append(ref[1:], ref[-1])  # the current of sample k shows in the force at k+1
+    opti.minimize(ca.sumsqr(force(x) - target))
+    greedy = np.empty(n)
+    last = 0.0
+    for k in range(n):
+        last = float(np.clip(model.x_of_force(max(target[k], 0.0), gap), last - slew, last + slew))
+        greedy[k] = last
+    opti.set_initial(x, greedy)
+    opti.solver("ipopt", {"print_time": False}, {"print_level": 0, "sb": "yes", "max_iter": 500})
+    try:
+        x_opt = np.asarray(opti.solve().value(x), float)
+    except RuntimeError as exc:
+        raise RuntimeError(f"offline optimum did not converge: {exc}") from exc
+    op = model.operator(gap)
+    state, currents = op.initial_state(0.0), np.empty(n)
+    for k in range(n):
+        state, currents[k] = op.inverse_step(state, float(x_opt[k]))
+    return np.clip(currents, 0.0, plant.current_limit)
 
 
 def _smooth_path(waypoints, segment: float):
