@@ -10,8 +10,9 @@ import numpy as np
 
 from mpc.model import PredictionModel
 
-SOLVERS = ("ipopt", "sqp")
-"""Solver variants available now: IPOPT (robust default) and CasADi sqpmethod + qrqp."""
+SOLVERS = ("ipopt", "sqp", "gn")
+"""Solver variants: IPOPT (robust default), CasADi sqpmethod + qrqp, and ``gn`` (Gauss–Newton
+SQP with qrqp; single-shooting problems only, :mod:`mpc.shooting`)."""
 WARM_STARTS = ("inverse", "shift", "cold")
 
 
@@ -104,6 +105,9 @@ class Nmpc:
             raise ValueError(f"only scalar inputs are supported, model has nu={model.nu}")
         if not (u_min < u_max and du_max > 0):
             raise ValueError(f"need u_min < u_max and du_max > 0, got {u_min}, {u_max}, {du_max}")
+        if settings.solver == "gn":
+            raise ValueError("solver 'gn' is only available for single-shooting problems; "
+                             "allowed here: ipopt, sqp")
         self.model = model
         self.settings = settings
         self.u_min, self.u_max, self.du_max = float(u_min), float(u_max), float(du_max)

@@ -20,7 +20,12 @@ def _reluctance() -> Bench:
     return BENCH
 
 
-_FACTORIES = {"pam": _pam, "compliant": _compliant, "reluctance": _reluctance}
+def _dea() -> Bench:
+    from experiments.benches.dea import BENCH
+    return BENCH
+
+
+_FACTORIES = {"pam": _pam, "compliant": _compliant, "reluctance": _reluctance, "dea": _dea}
 BENCH_NAMES = tuple(_FACTORIES)
 DEFAULT_BENCH = "pam"
 

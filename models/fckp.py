@@ -1,0 +1,125 @@
+"""Fractional-order creep KP (FCKP) model, wang2025 eq. (9): ``W[u] = D^(−α) w[u]``.
+
+``w[u]`` is the KP model (eq. (5)) of the normalised input ``p = 2u/u_max − 1``, shifted and
+scaled to a displacement: ``w = stroke (κ/Σμ + 1)/2``, so zero volts on a demagnetised
+actuator gives zero (the shift is a constant kernel, which eq. (5) allows). The creep is
+the GL fractional *integral* of order α on ``w`` (a constant input rises ∝ t^α, benches.md).
+
+The KP memory is a state vector (``[p_last, ξ_1..ξ_n]``); the creep memory is the whole
+past of ``w`` and lives in a :class:`models.fractional.GrunwaldLetnikov` object.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from models.fractional import GrunwaldLetnikov
+from models.kp import KrasnoselskiiPokrovskii, paper_density, threshold_grid
+
+
+@dataclass(frozen=True)
+class FckpParams:
+    """Parameters of an FCKP model on a threshold grid with the density of Fig. 3."""
+
+    levels: int = 12
+    """Thresholds on the grid's axis."""
+    max_span: int = 2
+    """Kernels only for threshold pairs at most this many grid steps apart (loops of at
+    most 2 × 0.17 of the normalised range 2): a DEA's loop is narrow, and the NLP smaller."""
+    delta: float = 0.15
+    """Slope parameter δ of eq. (7), in normalised input units (input range 2)."""
+    density_c: float = 2.0
+    """c of the density under Fig. 3."""
+    density_sigma: float = 1.0
+    """σ of the density under Fig. 3."""
+    creep_order: float = 0.02
+    """α (Section 5.1 identifies 0.02)."""
+    stroke: float = 4.0
+    """Creep-free output at full input (mm)."""
+    u_max: float = 10.0
+    """Input range [0, u_max] (V into the 1000 V/V amplifier)."""
+    sample_period: float = 0.01
+    """GL step h (s): the input is held between samples."""
+
+    def __post_init__(self):
+        if self.levels < 2 or self.max_span < 1:
+            raise ValueError(f"levels must be >= 2 and max_span >= 1, got {self.levels}, {self.max_span}")
+        for name in ("delta", "density_c", "density_sigma", "stroke", "u_max", "sample_period"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be finite and > 0, got {value}")
+        if not (np.isfinite(self.creep_order) and 0 <= self.creep_order < 1):
+            raise ValueError(f"creep_order must be in [0, 1), got {self.creep_order}")
+
+
+class Fckp:
+    """FCKP model: KP on the normalised input, then the GL creep integral.
+
+    Parameters
+    ----------
+    params : FckpParams
+        Grid, density, creep order, scaling.
+    """
+
+    def __init__(self, params: FckpParams = FckpParams()):
+        self.params = params
+        rho1, rho2 = threshold_grid(params.levels, params.delta, params.max_span)
+        weights = paper_density(rho1, rho2, params.density_c, params.density_sigma)
+        self.kp = KrasnoselskiiPokrovskii(rho1, rho2, weights, params.delta)
+
+    def normalise(self, u):
+        """Input voltage to the KP input p ∈ [−1, 1]."""
+        return 2.0 * u / self.params.u_max - 1.0
+
+    def denormalise(self, p):
+        """KP input back to volts."""
+        return 0.5 * (p + 1.0) * self.params.u_max
+
+    def static(self, kappa):
+        """KP output κ to the creep-free displacement w (mm)."""
+        return self.params.stroke * 0.5 * (kappa / self.kp.total_weight + 1.0)
+
+    def kappa_of(self, w):
+        """Inverse of :meth:`static`."""
+        return (2.0 * w / self.params.stroke - 1.0) * self.kp.total_weight
+
+    def initial_state(self) -> np.ndarray:
+        """Demagnetised at zero volts: every kernel at −1."""
+        return self.kp.initial_state(-1.0)
+
+    def creep(self, window: int | None = None) -> GrunwaldLetnikov:
+        """A fresh creep memory: ``D^(−α)`` at step h with memory window ``window``."""
+        return GrunwaldLetnikov(-self.params.creep_order, self.params.sample_period, window)
+
+    def creep_inverse(self, window: int | None = None) -> GrunwaldLetnikov:
+        """A fresh creep-inverse memory: ``D^(+α)``, Section 2.3 (exact inverse of :meth:`creep`
+        for the same h and full memory, since the GL weights of ±α convolve to 1)."""
+        return GrunwaldLetnikov(self.params.creep_order, self.params.sample_period, window)
+
+    def kp_step(self, state, u: float) -> tuple[np.ndarray, float]:
+        """Exact KP step to voltage ``u``; returns ``(state, w)`` (creep-free, mm)."""
+        state, kappa = self.kp.step(state, float(self.normalise(u)))
+        return state, float(self.static(kappa))
+
+    def step(self, state, creep: GrunwaldLetnikov, u: float) -> tuple[np.ndarray, float]:
+        """Exact FCKP step: KP, then push w into the creep memory; returns ``(state, W)``."""
+        state, w = self.kp_step(state, u)
+        return state, creep.push(w)
+
+    def smooth_kp_step(self, eps: float, direction_eps: float = 0.0) -> ca.Function:
+        """Smooth KP step in volts ``(state, u) -> (state_next, w)`` (CasADi)."""
+        inner = self.kp.smooth_step(eps, direction_eps)
+        x = ca.SX.sym("x", self.kp.n_kernels + 1)
+        u = ca.SX.sym("u")
+        x_next, kappa = inner(x, self.normalise(u))
+        return ca.Function("fckp_kp_step", [x, u], [x_next, self.static(kappa)], ["x", "u"], ["x_next", "w"])
+
+    def implicit_inverse(self, state, w_target: float, zeta: float = 0.01) -> tuple[np.ndarray, float]:
+        """Section 3.2: the voltage whose KP output reaches ``w_target``, searched from the
+        last input in steps of ζ (V); returns ``(state, u)``."""
+        p_state, p = self.kp.inverse_step(state, float(self.kappa_of(w_target)), -1.0, 1.0,
+                                          step=2.0 * zeta / self.params.u_max)
+        return p_state, float(self.denormalise(p))

@@ -1,0 +1,126 @@
+"""Grünwald–Letnikov fractional operator (wang2025 eq. (4)/(9)) and the creep inverse (Section 2.3).
+
+``D^q f(t_k) ≈ h^(−q) Σ_{j=0}^{k} w_j f(t_{k−j})`` with the weights
+``w_0 = 1, w_j = w_{j−1} (1 − (q + 1)/j)`` (the generalised binomial coefficients
+``(−1)^j C(q, j)``). ``q < 0`` is a fractional integral: the FCKP creep of wang2025 is
+``q = −α`` with α = 0.02, so a constant input gives a slow rise ∝ t^α (benches.md).
+
+For a window ``L`` only the last ``L`` past samples enter the sum (the short-memory
+principle); ``None`` keeps the full memory.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def gl_weights(order: float, n: int) -> np.ndarray:
+    """The first ``n`` Grünwald–Letnikov weights of ``order``."""
+    if n < 1:
+        raise ValueError(f"n must be >= 1, got {n}")
+    if not np.isfinite(order):
+        raise ValueError(f"order must be finite, got {order}")
+    w = np.empty(n)
+    w[0] = 1.0
+    for j in range(1, n):
+        w[j] = w[j - 1] * (1.0 - (order + 1.0) / j)
+    return w
+
+
+def gl_apply(order: float, h: float, values, window: int | None = None) -> np.ndarray:
+    """``D^order`` of a sampled signal at every sample (memory from the first sample).
+
+    Parameters
+    ----------
+    order : float
+        Fractional order (negative: integral).
+    h : float
+        Sample period.
+    values : array_like, shape (n,)
+        ``f(t_0), …, f(t_{n−1})``; ``f`` is taken as zero before ``t_0``.
+    window : int, optional
+        Keep only the current sample and the last ``window`` past samples (None: all).
+    """
+    if not h > 0:
+        raise ValueError(f"h must be > 0, got {h}")
+    f = np.asarray(values, float)
+    n = len(f)
+    w = gl_weights(order, n)
+    if window is not None:
+        if window < 0:
+            raise ValueError(f"window must be >= 0 or None, got {window}")
+        w[window + 1:] = 0.0
+    return h ** (-order) * np.convolve(f, w)[:n]
+
+
+class GrunwaldLetnikov:
+    """Streaming GL operator: push one sample, get ``D^order`` at that sample.
+
+    Parameters
+    ----------
+    order : float
+        Fractional order (``−α`` for the FCKP creep integral).
+    h : float
+        Sample period (s).
+    window : int, optional
+        Memory window L in past samples; None keeps the full memory.
+    capacity : int
+        Samples to pre-allocate (grows when exceeded).
+    """
+
+    def __init__(self, order: float, h: float, window: int | None = None, capacity: int = 8192):
+        if not h > 0:
+            raise ValueError(f"h must be > 0, got {h}")
+        if window is not None and window < 0:
+            raise ValueError(f"window must be >= 0 or None, got {window}")
+        self.order, self.h, self.window = float(order), float(h), window
+        self._scale = h ** (-order)
+        self._w = gl_weights(order, max(capacity, 2))
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the memory."""
+        self._hist = np.empty(len(self._w))
+        self._n = 0
+
+    @property
+    def history(self) -> np.ndarray:
+        """Samples pushed so far, oldest first."""
+        return self._hist[: self._n].copy()
+
+    def _grow(self, n: int) -> None:
+        if n > len(self._w):
+            size = max(n, 2 * len(self._w))
+            self._w = gl_weights(self.order, size)
+            hist = np.empty(size)
+            hist[: self._n] = self._hist[: self._n]
+            self._hist = hist
+
+    def push(self, value: float) -> float:
+        """Append ``f(t_k)`` and return ``D^order f(t_k)``."""
+        self._grow(self._n + 1)
+        self._hist[self._n] = value
+        self._n += 1
+        return self.value()
+
+    def value(self) -> float:
+        """``D^order f`` at the last pushed sample."""
+        n = self._n if self.window is None else min(self._n, self.window + 1)
+        recent = self._hist[self._n - n: self._n][::-1]
+        return float(self._scale * (self._w[:n] @ recent))
+
+    def history_terms(self, horizon: int) -> np.ndarray:
+        """The part of ``D^order f(t_{k+i})``, i = 1..horizon, that the past fixes.
+
+        ``D^order f(t_{k+i}) = h^(−order) [Σ_{j<i} w_j f_{k+i−j} + Σ_{j≥i} w_j f_{k+i−j}]``:
+        the first sum holds the future samples (decisions of a predictive controller), the
+        second only pushed ones; this returns ``h^(−order)`` times the second sum for each
+        ``i`` (within the window, if any). See design/nmpc.md.
+        """
+        self._grow(self._n + horizon + 1)
+        out = np.empty(horizon)
+        past = self._hist[: self._n][::-1]  # f_k, f_{k−1}, ...
+        for i in range(1, horizon + 1):
+            n = len(past) if self.window is None else max(0, min(len(past), self.window + 1 - i))
+            out[i - 1] = self._scale * (self._w[i: i + n] @ past[:n])
+        return out

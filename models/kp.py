@@ -1,0 +1,183 @@
+"""Krasnoselskii–Pokrovskii (KP) hysteresis, wang2025 eqs. (5)–(7).
+
+A KP kernel with thresholds ρ1 < ρ2 and slope δ follows the ridge function (eq. (7))
+``φ(τ) = −1 (τ ≤ 0), −1 + 2τ/δ (0 < τ < δ), 1 (τ ≥ δ)``: while the input rises its output
+is ``max(ξ, φ(u − ρ2))``, while it falls ``min(ξ, φ(u − ρ1))``, where ξ is its last output
+(eq. (6)). So it switches up over [ρ2, ρ2 + δ] and down over [ρ1, ρ1 + δ], and stays in
+[−1, 1]. The KP model is the density-weighted sum over a threshold grid (eq. (5)).
+
+State: ``[u_last, ξ_1, …, ξ_n]``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from models.base import SteppedModel
+from models.smooth import smooth_clip, smooth_max, smooth_min
+
+
+def ridge(tau, delta: float):
+    """Ridge function φ_R of eq. (7) (NumPy)."""
+    return np.clip(-1.0 + 2.0 * np.asarray(tau, float) / delta, -1.0, 1.0)
+
+
+def paper_density(rho1, rho2, c: float = 2.0, sigma: float = 1.0, scale: float = 0.004):
+    """The density given with Fig. 3: ``scale / ([1 + ((ρ1 − c)/(cσ))²] [1 + ((ρ2 + c)/(cσ))²])``.
+
+    Read from the garbled text as the usual product of two Cauchy factors; it is positive
+    and largest for kernels with a high ρ1 and a low ρ2 (narrow loops).
+    """
+    rho1, rho2 = np.asarray(rho1, float), np.asarray(rho2, float)
+    return scale / ((1 + ((rho1 - c) / (c * sigma)) ** 2) * (1 + ((rho2 + c) / (c * sigma)) ** 2))
+
+
+def threshold_grid(levels: int, delta: float, max_span: int | None = None, low: float = -1.0,
+                   high: float = 1.0):
+    """Pairs (ρ1, ρ2), ρ1 < ρ2, on ``levels`` thresholds in [low, high − δ].
+
+    ``max_span`` keeps only pairs at most that many grid steps apart (narrower loops, fewer
+    kernels); None keeps every pair.
+    """
+    if levels < 2:
+        raise ValueError(f"levels must be >= 2, got {levels}")
+    if not 0 < delta < high - low:
+        raise ValueError(f"delta must be in (0, {high - low}), got {delta}")
+    if max_span is not None and max_span < 1:
+        raise ValueError(f"max_span must be >= 1 or None, got {max_span}")
+    t = np.linspace(low, high - delta, levels)
+    i, j = np.triu_indices(levels, k=1)
+    if max_span is not None:
+        keep = j - i <= max_span
+        i, j = i[keep], j[keep]
+    return t[i], t[j]
+
+
+@dataclass(frozen=True)
+class KrasnoselskiiPokrovskii(SteppedModel):
+    """KP model: ``κ[u] = Σ μ_i κ_i[u]`` over kernels with thresholds ``(rho1_i, rho2_i)``.
+
+    Parameters
+    ----------
+    rho1, rho2 : array_like
+        Kernel thresholds, ``rho2 >= rho1 + delta`` for each kernel.
+    weights : array_like
+        Density μ at each kernel (times the grid cell area), ``>= 0``.
+    delta : float
+        Slope parameter δ > 0 of eq. (7).
+    """
+
+    rho1: np.ndarray
+    rho2: np.ndarray
+    weights: np.ndarray
+    delta: float
+
+    def __post_init__(self):
+        for name in ("rho1", "rho2", "weights"):
+            object.__setattr__(self, name, np.asarray(getattr(self, name), float).ravel())
+        n = len(self.rho1)
+        if not (len(self.rho2) == n == len(self.weights)) or n == 0:
+            raise ValueError("rho1, rho2 and weights must have the same, non-zero length")
+        if not self.delta > 0:
+            raise ValueError(f"delta must be > 0, got {self.delta}")
+        if np.any(self.weights < 0) or not np.all(np.isfinite(self.weights)):
+            raise ValueError("weights must be finite and >= 0")
+        if np.any(self.rho2 < self.rho1 + self.delta - 1e-12):
+            raise ValueError("each kernel needs rho2 >= rho1 + delta")
+
+    @property
+    def n_kernels(self) -> int:
+        """Number of kernels."""
+        return len(self.rho1)
+
+    @property
+    def total_weight(self) -> float:
+        """Σ μ: the output spans [−Σμ, Σμ]."""
+        return float(self.weights.sum())
+
+    def initial_state(self, u0: float) -> np.ndarray:
+        """State after a monotone rise to ``u0`` from below every threshold (all kernels
+        at −1 when ``u0`` is below every ρ2)."""
+        u0 = float(u0)
+        return np.concatenate(([u0], ridge(u0 - self.rho2, self.delta)))
+
+    def kernels_step(self, state, u: float) -> np.ndarray:
+        """Kernel outputs ξ after moving the input to ``u`` (eq. (6))."""
+        u_last, xi = float(state[0]), np.asarray(state[1:], float)
+        if u > u_last:
+            return np.maximum(xi, ridge(u - self.rho2, self.delta))
+        if u < u_last:
+            return np.minimum(xi, ridge(u - self.rho1, self.delta))
+        return xi.copy()
+
+    def step(self, state, u: float, weights=None) -> tuple[np.ndarray, float]:
+        """Exact step to input ``u``; returns ``(state, κ)``. ``weights`` replaces the density
+        (for adaptive estimates of it)."""
+        if not np.isfinite(u):
+            raise ValueError(f"u must be finite, got {u}")
+        xi = self.kernels_step(state, u)
+        return np.concatenate(([u], xi)), float((self.weights if weights is None else weights) @ xi)
+
+    def output(self, state) -> float:
+        """κ of a state."""
+        return float(self.weights @ np.asarray(state[1:], float))
+
+    def smooth_kernels(self, u_last, xi, u, eps: float, direction_eps: float):
+        """Smooth kernel update (CasADi or NumPy): smoothed ridge, max/min and direction.
+
+        The direction is ``s = tanh(Δu / direction_eps)``; the rising and falling updates are
+        blended by ``(1 ± s)/2``, so a standing input keeps the average of both, which equals
+        ξ away from the ridges.
+        """
+        s = ca.tanh((u - u_last) / direction_eps)
+        up = smooth_max(xi, smooth_clip(-1.0 + 2.0 * (u - self.rho2) / self.delta, 1.0, eps), eps)
+        down = smooth_min(xi, smooth_clip(-1.0 + 2.0 * (u - self.rho1) / self.delta, 1.0, eps), eps)
+        return 0.5 * (1 + s) * up + 0.5 * (1 - s) * down
+
+    def smooth_step(self, eps: float, direction_eps: float = 0.0) -> ca.Function:
+        """Smooth step ``(state, u) -> (state_next, κ)`` as a CasADi Function."""
+        if not eps > 0:
+            raise ValueError(f"eps must be > 0, got {eps}")
+        direction_eps = direction_eps or eps
+        x = ca.SX.sym("x", self.n_kernels + 1)
+        u = ca.SX.sym("u")
+        xi = self.smooth_kernels(x[0], x[1:], u, eps, direction_eps)
+        kappa = ca.dot(ca.DM(self.weights), xi)
+        return ca.Function("kp_step", [x, u], [ca.vertcat(u, xi), kappa], ["x", "u"], ["x_next", "y"])
+
+    def inverse_step(self, state, y_target: float, u_min: float = -1.0, u_max: float = 1.0,
+                     step: float = 0.01, weights=None) -> tuple[np.ndarray, float]:
+        """Implicit inverse (Section 3.2): search from the last input in steps of ζ = ``step``.
+
+        Moves the input up (or down) from ``u_last`` in steps of ``step`` until the model
+        output reaches ``y_target``, then refines within the last step by bisection; returns
+        the bound when the target is beyond what the range can reach. ``weights`` as in
+        :meth:`step`.
+        """
+        if not np.isfinite(y_target):
+            raise ValueError(f"y_target must be finite, got {y_target}")
+        u_last = float(np.clip(state[0], u_min, u_max))
+        y_now = self.step(state, u_last, weights)[1]
+        sign = 1.0 if y_target > y_now else -1.0
+        bound = u_max if sign > 0 else u_min
+        reached = (lambda y: y >= y_target) if sign > 0 else (lambda y: y <= y_target)
+        lo = u_last
+        u = u_last
+        while True:
+            u = float(np.clip(u + sign * step, u_min, u_max))
+            if reached(self.step(state, u, weights)[1]):
+                break
+            lo = u
+            if u == bound:
+                return self.step(state, u)[0], u
+        hi = u
+        for _ in range(30):  # bisection within the last ζ step
+            mid = 0.5 * (lo + hi)
+            if reached(self.step(state, mid, weights)[1]):
+                hi = mid
+            else:
+                lo = mid
+        return self.step(state, hi)[0], hi

@@ -1,0 +1,135 @@
+"""Dielectric elastomer actuator with a 20 g load (wang2025 eq. (2)).
+
+::
+
+    x1' = x2
+    x2' = f(x1, x2) + g(x1) W[u] + d(t)
+    f = −ω² (x1 + β x1³) − 2 ζ ω x2          (hyperelastic stiffening, viscous damping)
+    g = ω² (1 + γ tanh(x1 / 2 mm))           (bounded, > 0: Assumption 3)
+
+so that at rest x1 ≈ W: the FCKP output is the displacement it would cause statically.
+W[u] is the FCKP model with the *full* creep memory at the 100 Hz input rate (the input is
+held between samples); the mechanics are integrated with RK4 at ``substeps`` per sample.
+d(t) is a bounded, slow disturbance (Assumption 1); the laser sensor adds white noise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from models.fckp import Fckp, FckpParams
+from plants.base import Measurement
+
+
+@dataclass(frozen=True)
+class DeaParams:
+    """DEA plant parameters; the defaults are the *nominal* model the controllers know."""
+
+    fckp: FckpParams = FckpParams()
+    """Hysteresis and creep."""
+    natural_frequency: float = 2 * np.pi * 6.0
+    """ω of the membrane with its load (rad/s)."""
+    damping_ratio: float = 0.7
+    """ζ (VHB's strong viscoelastic damping lumped as viscous)."""
+    stiffening: float = 0.02
+    """β (1/mm²): hyperelastic stiffening."""
+    gain_variation: float = 0.1
+    """γ: how the electromechanical gain g changes with displacement."""
+    disturbance: float = 0.0
+    """Amplitude of d(t) as an equivalent static displacement (mm)."""
+    noise: float = 0.0005
+    """Laser sensor noise (mm, standard deviation)."""
+    substeps: int = 10
+    """RK4 steps per 10 ms sample."""
+
+    def __post_init__(self):
+        for name in ("natural_frequency", "damping_ratio"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be finite and > 0, got {value}")
+        for name in ("stiffening", "disturbance", "noise"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be finite and >= 0, got {value}")
+        if not 0 <= self.gain_variation < 1:
+            raise ValueError(f"gain_variation must be in [0, 1), got {self.gain_variation}")
+        if self.substeps < 1:
+            raise ValueError(f"substeps must be >= 1, got {self.substeps}")
+
+    @property
+    def sample_period(self) -> float:
+        """Control sample period (s)."""
+        return self.fckp.sample_period
+
+    def f(self, x1, x2):
+        """Hyperelastic and damping acceleration (mm/s²)."""
+        w = self.natural_frequency
+        return -w * w * (x1 + self.stiffening * x1**3) - 2 * self.damping_ratio * w * x2
+
+    def g(self, x1, tanh=np.tanh):
+        """Electromechanical gain (1/s²), bounded in ω²(1 ± γ)."""
+        return self.natural_frequency**2 * (1 + self.gain_variation * tanh(x1 / 2.0))
+
+
+def disturbance(t, amplitude: float, omega: float):
+    """d(t): two slow sines, bounded by 1.5 ω² · amplitude (mm/s²)."""
+    return amplitude * omega**2 * (np.sin(2 * np.pi * 0.07 * t) + 0.5 * np.sin(2 * np.pi * 0.31 * t + 1.0))
+
+
+@dataclass
+class DeaActuator:
+    """Simulated DEA; input: amplifier command (V, 0–10); output: displacement (mm)."""
+
+    params: DeaParams = field(default_factory=DeaParams)
+
+    def __post_init__(self):
+        self.model = Fckp(self.params.fckp)
+        self.reset(0)
+
+    @property
+    def sample_period(self) -> float:
+        """Control sample period (s)."""
+        return self.params.sample_period
+
+    def reset(self, seed: int) -> Measurement:
+        """At rest at zero volts, demagnetised, empty creep memory; seed the sensor noise."""
+        self._rng = np.random.default_rng(seed)
+        self._kp = self.model.initial_state()
+        self._creep = self.model.creep()
+        self._x = np.zeros(2)
+        self._W = 0.0
+        self._u = 0.0
+        self._t = 0.0
+        return self._measure()
+
+    def _rhs(self, x, t):
+        p = self.params
+        d = disturbance(t, p.disturbance, p.natural_frequency)
+        return np.array([x[1], p.f(x[0], x[1]) + p.g(x[0]) * self._W + d])
+
+    def step(self, u: float) -> Measurement:
+        """Apply the voltage command ``u`` (V) for one sample."""
+        if not np.isfinite(u):
+            raise ValueError(f"plant input must be finite, got {u}")
+        p = self.params
+        self._u = float(np.clip(u, 0.0, p.fckp.u_max))
+        self._kp, self._W = self.model.step(self._kp, self._creep, self._u)
+        h = p.sample_period / p.substeps
+        x, t = self._x, self._t
+        for _ in range(p.substeps):
+            k1 = self._rhs(x, t)
+            k2 = self._rhs(x + 0.5 * h * k1, t + 0.5 * h)
+            k3 = self._rhs(x + 0.5 * h * k2, t + 0.5 * h)
+            k4 = self._rhs(x + h * k3, t + h)
+            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            t += h
+        self._x, self._t = x, self._t + p.sample_period
+        return self._measure()
+
+    def _measure(self) -> Measurement:
+        noisy = self._x[0] + self.params.noise * self._rng.standard_normal()
+        return Measurement(t=self._t, y=float(noisy), sensors={},
+                           truth={"displacement": float(self._x[0]), "W": self._W,
+                                  "voltage": self._u})
