@@ -48,3 +48,28 @@ def smoothing_error(model, inputs, eps: float, window: int, **smooth_options) ->
     in_window = np.concatenate(in_window)
     return {"max_open_loop": float(open_loop.max()), "max_in_window": float(np.abs(in_window).max()),
             "rms_in_window": float(np.sqrt(np.mean(in_window**2)))}
+
+
+def creep_window_error(model, inputs, windows) -> dict[str, dict[str, float]]:
+    """Creep output of an FCKP model with memory window L against the full memory.
+
+    ``model`` is a :class:`models.fckp.Fckp`; the same input sequence drives the full-memory
+    creep (the plant's) and each truncated one (L past samples, the short-memory principle).
+    Returns, per window (``"full"`` for None), the max and RMS difference in W and the
+    relative RMS difference (against the RMS of W).
+    """
+    inputs = np.asarray(inputs, float)
+    state = model.initial_state()
+    w = np.empty(len(inputs))
+    for k, u in enumerate(inputs):
+        state, w[k] = model.kp_step(state, u)
+    full_memory = model.creep(None)
+    full = np.array([full_memory.push(v) for v in w])
+    out = {}
+    for window in windows:
+        memory = model.creep(window)
+        diff = np.array([memory.push(v) for v in w]) - full
+        out["full" if window is None else str(window)] = {
+            "max": float(np.max(np.abs(diff))), "rms": float(np.sqrt(np.mean(diff**2))),
+            "relative_rms": float(np.sqrt(np.mean(diff**2)) / np.sqrt(np.mean(full**2)))}
+    return out

@@ -82,9 +82,9 @@ class BicSettings:
     """Implicit-inverse search step (V)."""
     creep_inverse: bool = True
     """Compensate the creep by the GL derivative of order α (Section 2.3)."""
-    velocity_filter: float = 0.02
+    velocity_filter: float = 0.1
     """Time constant of the filter on the differenced displacement (s)."""
-    unit_scale: float = 0.05
+    unit_scale: float = 0.1
     """λ: k2, Γ11 and Γ12 act as λ·k2, λ·Γ11, λ·Γ12 in our units (see :class:`Backstepping`)."""
 
     def __post_init__(self):
@@ -254,7 +254,8 @@ class Backstepping:
         self.predicted_output = float("nan")
 
     def _rbf(self, x1):
-        return np.exp(-((x1 - self.centres) ** 2) / 2.0)
+        """Gaussian RBFs (η = 1) of the displacement mapped from [0, 4] mm onto the centres' [−1, 1]."""
+        return np.exp(-(((x1 - 2.0) / 2.0 - self.centres) ** 2) / 2.0)
 
     def step(self, measurement: Measurement, ref_window) -> float:
         """Voltage for this sample."""
@@ -338,17 +339,16 @@ class LinearMpc:
                 Gamma[i, j] = (self.C @ np.linalg.matrix_power(self.A, i - j) @ self.B).item()
         # u_j = u_prev + Σ_{m<=min(j, Nc−1)} Δu_m
         S = np.tril(np.ones((Np, Nc)))
-        self._Phi, self._Gu = Phi, Gamma @ np.ones(Np) * 1.0
+        self._Phi, self._S = Phi, S
         self._G = Gamma @ S * self.a
         self._Gamma = Gamma
         q, r = settings.q_output, settings.r_rate
         L = np.tril(np.ones((Nc, Nc)))
-        P = 2 * (q * self._G.T @ self._G + r * np.eye(Nc) + settings.r_input * (S.T @ S) * 0)
-        self._L = L
+        P = 2 * (q * self._G.T @ self._G + r * np.eye(Nc) + settings.r_input * S.T @ S)
         self._solver = osqp.OSQP()
         self._solver.setup(P=sparse.csc_matrix(P), q=np.zeros(Nc), A=sparse.csc_matrix(L),
-                           l=np.zeros(Nc), u=np.full(Nc, model.fckp.u_max), verbose=False, warm_start=True,
-                           eps_abs=1e-8, eps_rel=1e-8, max_iter=4000, polish=False)
+                           l=np.zeros(Nc), u=np.full(Nc, model.fckp.u_max), verbose=False, warm_starting=True,
+                           eps_abs=1e-8, eps_rel=1e-8, max_iter=4000, polishing=False)
         # Kalman filter on [x1, x2, d]
         self._Q = np.diag([1e-10, 1e-6, 1e-6])
         self._R = model.noise**2 if model.noise > 0 else 1e-12
@@ -381,9 +381,10 @@ class LinearMpc:
         s = self.s
         ref = np.asarray(ref_window[1: s.prediction + 1], float)
         free = self._Phi @ self.x + self._Gamma @ np.full(s.prediction, self._affine(self._u))
-        q = 2 * s.q_output * self._G.T @ (free - ref)
-        self._solver.update(q=q, l=-self._u * np.ones(s.control), u=(self.model.fckp.u_max - self._u) * np.ones(s.control))
-        result = self._solver.solve()
+        q = 2 * s.q_output * self._G.T @ (free - ref) + 2 * s.r_input * self._S.T @ np.full(s.prediction, self._u)
+        room = np.ones(s.control)
+        self._solver.update(q=q, l=-self._u * room, u=(self.model.fckp.u_max - self._u) * room)
+        result = self._solver.solve(raise_error=False)
         if result.info.status_val not in (1, 2) or not np.all(np.isfinite(result.x)):
             self.failures += 1
             u = self._u  # hold the last input
@@ -577,7 +578,7 @@ def _defaults() -> dict:
             "pid": PidGains(kp=0.8, ki=1.67, kd=0.01), "bic": BicSettings(),
             "linear_mpc": LinearMpcSettings(),
             "nmpc": NmpcSettings(horizon=15, q_output=1e4, r_rate=1.0, eps=1e-3, direction_eps=1e-4,
-                                 solver="gn", max_iter=30, tol=1e-3)}
+                                 solver="gn", max_iter=60, tol=1e-3)}
 
 
 def _controllers() -> dict[str, ControllerSpec]:
