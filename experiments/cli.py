@@ -1,4 +1,4 @@
-"""``hystmpc`` command line (interface.md): list, run, compare, identify.
+"""``hystmpc`` command line (interface.md): list, run, compare, identify, codegen, speed.
 
 Exit codes: 0 success; 2 bad usage or bad input, with one line naming what is wrong and
 what is allowed; 1 anything else.
@@ -59,6 +59,23 @@ def build_parser() -> argparse.ArgumentParser:
     p_cmp.add_argument("scenarios", nargs="*", help="default: all of the bench's scenarios")
     p_cmp.add_argument("--controllers", help="comma-separated (default: all of the bench's)")
     _add_run_options(p_cmp)
+    p_cg = sub.add_parser("codegen", help="write, build and load the C solver of a bench's NMPC")
+    p_cg.add_argument("bench", help=f"one of {', '.join(BENCH_NAMES)}")
+    p_cg.add_argument("--solver", default="rti", help="rti (the only code-generated variant so far)")
+    p_cg.add_argument("--out", help="folder for the C files (default codegen/<bench>)")
+    p_cg.add_argument("--verify", action="store_true",
+                      help="replay the default scenario with the in-process and the compiled solver")
+    p_cg.add_argument("--duration", type=float, help="length of the verification run (s)")
+    p_cg.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    p_cg.add_argument("--json", dest="json_file", help="also write the report to this file")
+    p_cg.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    p_sp = sub.add_parser("speed", help="per-step compute of every solver variant on the default scenario")
+    p_sp.add_argument("bench", help=f"one of {', '.join(BENCH_NAMES)}")
+    p_sp.add_argument("--variants", default="ipopt,sqp,rti,rti-c", help="comma-separated solver variants")
+    p_sp.add_argument("--duration", type=float, help="run length (s, default: the scenario's)")
+    p_sp.add_argument("--out", help="results folder (default results/<bench>/speed-<timestamp>)")
+    p_sp.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    p_sp.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p_id = sub.add_parser("identify", help="identify a bench's model from simulated measurements")
     p_id.add_argument("bench", help="a bench with an identification step (reluctance)")
     p_id.add_argument("--out", default="identified.json", help="file for the identified model (JSON)")
@@ -89,6 +106,65 @@ def _identify(args) -> int:
     if not args.quiet:
         print(f"core {doc['core']}: p1 = {doc['p1_A']:.5f} A (plant {doc['true_p1_A']:.5f}), "
               f"p2 = {doc['p2_per_A_m']:.5f} 1/(A m) (plant {doc['true_p2_per_A_m']:.5f}); written to {out}")
+    return 0
+
+
+CODEGEN_SOLVERS = ("rti",)
+
+
+def _positive_duration(value) -> None:
+    if value is not None and not value > 0:
+        raise UsageError(f"--duration must be > 0 seconds, got {value}")
+
+
+def _codegen(args) -> int:
+    from experiments.realtime import codegen
+    bench = _bench(args.bench)
+    if args.solver not in CODEGEN_SOLVERS:
+        raise UsageError(f"--solver {args.solver!r} cannot be code-generated yet; "
+                         f"allowed: {', '.join(CODEGEN_SOLVERS)}")
+    _positive_duration(args.duration)
+    config = _config(bench, args.overrides)
+    out = Path(args.out) if args.out else Path("codegen") / bench.name
+    try:
+        report = codegen(bench, config, out, args.verify, args.duration)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    if args.json_file:
+        Path(args.json_file).write_text(json.dumps(report, indent=1) + "\n")
+    if not args.quiet:
+        print(f"C solver written and built in {out}: {', '.join(report['files'])}")
+        if args.verify:
+            c = report["standalone"]
+            print(f"verify on {report['scenario']} ({report['samples']} samples): largest input difference "
+                  f"in-process vs compiled {report['max_input_difference']:.3g}; standalone program: "
+                  f"output difference {c['max_output_difference_first_200']:.3g}, "
+                  f"{c['median_us']:.0f} µs median, {c['p95_us']:.0f} µs p95 per call")
+    return 0
+
+
+def _speed(args) -> int:
+    from experiments.realtime import speed, speed_table
+    from experiments.report import version
+    bench = _bench(args.bench)
+    variants = args.variants.split(",")
+    _check_names("solver variant", variants, [v for v in SOLVERS if v != "gn"])
+    _positive_duration(args.duration)
+    config = _config(bench, args.overrides)
+    out = Path(args.out) if args.out else Path("results") / bench.name / ("speed-" + dt.datetime.now(
+        dt.UTC).strftime("%Y%m%dT%H%M%SZ"))
+    try:
+        result = speed(bench, config, variants, args.duration, out / "codegen")
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    result.update({"schema": "hystmpc.speed/1", "version": version(), "overrides": list(args.overrides)})
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "speed.json").write_text(json.dumps(result, indent=1) + "\n")
+    table = speed_table(result)
+    (out / "speed.md").write_text(table + "\n")
+    if not args.quiet:
+        print(table)
+        print(f"\nresults: {out / 'speed.json'}")
     return 0
 
 
@@ -203,6 +279,10 @@ def main(argv: list[str] | None = None) -> int:
             return _list(args)
         if args.command == "identify":
             return _identify(args)
+        if args.command == "codegen":
+            return _codegen(args)
+        if args.command == "speed":
+            return _speed(args)
         bench = _bench(args.bench)
         if args.command == "run":
             _check_names("scenario", [args.scenario], bench.scenarios)

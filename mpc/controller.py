@@ -64,6 +64,7 @@ class NmpcController:
         self.reinitialisations = 0
         self.estimator_resets = 0
         self.iterations: list[int] = []
+        self.solve_times: list[float] = []
         self.statuses: dict[str, int] = {}
         self.predicted_output = float("nan")
 
@@ -105,6 +106,7 @@ class NmpcController:
         u_ff = u_inv() if self.settings.r_input > 0 else np.zeros(N)  # zero weight: value unused
         result = self.nmpc.solve(x, d, self._u_last, refs, u_guess, x_guess, u_ff=u_ff)
         self.iterations.append(result.iterations)
+        self.solve_times.append(result.solve_time)
         self.statuses[result.status] = self.statuses.get(result.status, 0) + 1
         if result.success:
             u = float(result.u_plan[0, 0])

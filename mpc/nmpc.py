@@ -10,9 +10,11 @@ import numpy as np
 
 from mpc.model import PredictionModel
 
-SOLVERS = ("ipopt", "sqp", "gn")
-"""Solver variants: IPOPT (robust default), CasADi sqpmethod + qrqp, and ``gn`` (Gauss–Newton
-SQP with qrqp; single-shooting problems only, :mod:`mpc.shooting`)."""
+SOLVERS = ("ipopt", "sqp", "rti", "rti-c", "gn")
+"""Solver variants: IPOPT (robust default); CasADi sqpmethod + qrqp; ``rti``, one Gauss–Newton
+SQP step per sample as one CasADi Function (:mod:`mpc.rti`); ``rti-c``, the same generated
+as C, compiled and loaded; ``gn``, Gauss–Newton SQP to convergence (single-shooting problems
+only, :mod:`mpc.shooting`)."""
 WARM_STARTS = ("inverse", "shift", "cold")
 
 
@@ -123,19 +125,23 @@ class Nmpc:
         u_prev = ca.SX.sym("u_prev")
         ref = ca.SX.sym("ref", N)
         u_ff = ca.SX.sym("u_ff", N)
-        cost = 0
         shooting = [X[:, 0] - x0]
-        rates = []
+        rates, residuals = [], []
         for k in range(N):
             shooting.append(X[:, k + 1] - m.step(X[:, k], U[0, k], d))
             e = m.output(X[:, k + 1], d) - ref[k]
             du = U[0, k] - (u_prev if k == 0 else U[0, k - 1])
             rates.append(du)
-            cost += s.q_output * e**2 + s.r_rate * du**2 + s.r_input * (U[0, k] - u_ff[k]) ** 2
+            residuals += [np.sqrt(s.q_output) * e, np.sqrt(s.r_rate) * du,
+                          np.sqrt(s.r_input) * (U[0, k] - u_ff[k])]
+        residual = ca.vertcat(*residuals)
+        cost = ca.sumsqr(residual)
         w = ca.vertcat(ca.vec(X), ca.vec(U))
         g = ca.vertcat(*shooting, *rates)
         p = ca.vertcat(x0, d, u_prev, ref, u_ff)
         nlp = {"x": w, "f": cost, "g": g, "p": p}
+        self.residual = ca.Function("nmpc_residual", [w, p], [residual], ["w", "p"], ["r"])
+        self.constraints = ca.Function("nmpc_constraints", [w, p], [g], ["w", "p"], ["g"])
         if s.solver == "ipopt":
             opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
                     "ipopt.max_iter": s.max_iter, "ipopt.tol": s.tol,
@@ -144,6 +150,8 @@ class Nmpc:
                 opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
                              "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6})
             self._solver = ca.nlpsol("nmpc", "ipopt", nlp, opts)
+        elif s.solver in ("rti", "rti-c"):
+            self._solver = None
         else:
             opts = {"qpsol": "qrqp", "qpsol_options": {"print_iter": False, "print_header": False,
                                                        "error_on_fail": False},
@@ -158,6 +166,11 @@ class Nmpc:
         self._ubx = np.concatenate((np.inf * np.ones(n_shoot), self.u_max * np.ones(N)))
         self._n_shoot = n_shoot
         self._lam = None
+        if s.solver in ("rti", "rti-c"):
+            from mpc.rti import compile_function, rti_function
+            self.rti = rti_function(self.residual, self.constraints, self._lbg, self._ubg, self._lbx, self._ubx)
+            if s.solver == "rti-c":
+                self.rti = compile_function(self.rti)
 
     def solve(self, x0, d, u_prev: float, ref, u_guess, x_guess=None, u_ff=None) -> NmpcStep:
         """Solve the NLP from state ``x0`` for the references ``ref[0..N-1]`` = r_{k+1..k+N}.
@@ -187,6 +200,14 @@ class Nmpc:
         p = np.concatenate((np.asarray(x0, float).ravel(), np.asarray(d, float).ravel(), [u_prev],
                             np.asarray(ref, float).ravel(), u_ff))
         w0 = np.concatenate((np.asarray(x_guess, float).ravel(), u_guess))
+        if self._solver is None:  # RTI: one Gauss–Newton step from the warm start
+            start = time.perf_counter()
+            w = np.asarray(self.rti(w0, p)).ravel()
+            elapsed = time.perf_counter() - start
+            ok = bool(np.all(np.isfinite(w)))
+            return NmpcStep(u_plan=w[self._n_shoot:].reshape(N, 1), x_plan=w[: self._n_shoot].reshape(N + 1, nx),
+                            success=ok, status="RTI_Step" if ok else "RTI_Non_Finite", iterations=1,
+                            solve_time=elapsed)
         args = {"x0": w0, "p": p, "lbx": self._lbx, "ubx": self._ubx, "lbg": self._lbg, "ubg": self._ubg}
         if self.settings.warm_multipliers and self._lam is not None and x_guess is not None:
             args["lam_x0"], args["lam_g0"] = self._lam

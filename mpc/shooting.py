@@ -35,6 +35,9 @@ class SingleShootingNmpc:
     def __init__(self, predict: ca.Function, settings: NmpcSettings, u_min: float, u_max: float,
                  du_max: float = np.inf):
         N = settings.horizon
+        if settings.solver in ("rti", "rti-c"):
+            raise ValueError(f"solver {settings.solver!r} is not available for single-shooting problems; "
+                             "allowed here: ipopt, sqp, gn")
         if predict.size1_in(1) != N or predict.size1_out(0) != N:
             raise ValueError(f"predict must map {N} inputs to {N} outputs, "
                              f"got {predict.size1_in(1)} → {predict.size1_out(0)}")

@@ -1,0 +1,168 @@
+"""The same NMPC problem in do-mpc, to check hystmpc against a peer and to time both.
+
+Optional: needs the ``bench`` extra (``pip install -e '.[bench]'``). Used by the benchmark
+in :func:`compare_with_do_mpc` and a slow test only.
+
+The do-mpc problem is built from the bench's own discrete-time prediction model, horizon,
+weights and bounds: the state is augmented with the last input so that the slew bound
+``|u_k − u_{k−1}| <= du_max`` becomes two nonlinear constraints; the reference and the
+disturbance are time-varying parameters; ``rterm`` is the rate weight; the stage cost on
+``x_k`` (k = 1..N−1) plus the terminal cost on ``x_N`` is hystmpc's Σ_{k=1..N} q (y_k − r_k)²
+(the k = 0 term is a constant).
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+
+import casadi as ca
+import numpy as np
+
+
+def do_mpc_problem(nmpc, solver_options: dict | None = None):
+    """A do-mpc MPC with the problem of ``nmpc`` (a :class:`mpc.nmpc.Nmpc`)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        import do_mpc
+    m, s = nmpc.model, nmpc.settings
+    if s.r_input != 0:
+        raise ValueError("the do-mpc twin supports r_input = 0 only")
+    model = do_mpc.model.Model("discrete", symvar_type="SX")
+    x = model.set_variable("_x", "x", (m.nx, 1))
+    model.set_variable("_x", "u_last")
+    u = model.set_variable("_u", "u")
+    d = model.set_variable("_tvp", "d", (m.nd, 1))
+    model.set_variable("_tvp", "ref")
+    model.set_rhs("x", m.step(x, u, d))
+    model.set_rhs("u_last", u)
+    model.set_expression("y", m.output(x, d))
+    model.setup()
+    mpc = do_mpc.controller.MPC(model)
+    mpc.settings.n_horizon = s.horizon
+    mpc.settings.t_step = m.sample_period
+    mpc.settings.store_full_solution = False
+    mpc.settings.nlpsol_opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
+                                "ipopt.tol": 1e-10, **(solver_options or {})}
+    err = s.q_output * (model.aux["y"] - model.tvp["ref"]) ** 2
+    mpc.set_objective(lterm=err, mterm=err)
+    mpc.set_rterm(u=s.r_rate)
+    mpc.bounds["lower", "_u", "u"] = nmpc.u_min
+    mpc.bounds["upper", "_u", "u"] = nmpc.u_max
+    mpc.set_nl_cons("slew_up", model.u["u"] - model.x["u_last"], ub=nmpc.du_max)
+    mpc.set_nl_cons("slew_down", model.x["u_last"] - model.u["u"], ub=nmpc.du_max)
+    template = mpc.get_tvp_template()
+    state = {"refs": np.zeros(s.horizon + 1), "d": np.zeros(m.nd)}
+
+    def tvp(t_now):  # the caller sets the window before each step; time is not used
+        for k in range(s.horizon + 1):
+            template["_tvp", k, "ref"] = state["refs"][k]
+            template["_tvp", k, "d"] = state["d"]
+        return template
+
+    mpc.set_tvp_fun(tvp)
+    mpc.setup()
+    return mpc, state
+
+
+def first_inputs(nmpc, mpc, state, x0, d, u_prev: float, refs) -> tuple[float, float, float, float]:
+    """First input of both for one problem instance, and each solve's wall time (s).
+
+    ``refs`` are r_{k+1..k+N} as :meth:`mpc.nmpc.Nmpc.solve` takes them.
+    """
+    refs = np.asarray(refs, float)
+    start = time.perf_counter()
+    ours = nmpc.solve(x0, d, u_prev, refs, np.full(len(refs), u_prev))
+    t_ours = time.perf_counter() - start
+    # do-mpc's stage k costs x_k against its tvp ref_k: shift by one (the k = 0 term is constant)
+    state["refs"] = np.concatenate(([refs[0]], refs))
+    state["d"] = np.asarray(d, float).ravel()
+    mpc.reset_history()
+    mpc.x0 = np.concatenate((np.asarray(x0, float).ravel(), [u_prev]))
+    mpc.u0 = np.array([u_prev])
+    mpc.set_initial_guess()
+    start = time.perf_counter()
+    theirs = float(np.asarray(mpc.make_step(mpc.x0)).ravel()[0])
+    t_theirs = time.perf_counter() - start
+    return float(ours.u_plan[0, 0]), theirs, t_ours, t_theirs
+
+
+def compare_with_do_mpc(bench_name: str = "pam", samples: int = 5, duration: float = 4.0) -> dict:
+    """Solve a few closed-loop states of the bench's default scenario with both; time both.
+
+    The states come from an IPOPT run of hystmpc's NMPC; both solvers then start from the
+    same state, disturbance estimate, last input and reference window.
+    """
+    from dataclasses import replace
+
+    from experiments.benches import get_bench
+    from experiments.runner import reference_samples
+    bench = get_bench(bench_name)
+    config = bench.defaults()
+    config = {**config, "nmpc": replace(config["nmpc"], solver="ipopt", tol=1e-10, max_iter=500)}
+    adapter = bench.controllers["nmpc"].build(config)
+    nmpc = adapter.controller.nmpc
+    scenario = bench.scenarios[bench.default_scenario]
+    t, ref = reference_samples(scenario, bench.sample_period, duration)
+    plant = bench.make_plant(config)
+    meas = plant.reset(0)
+    N = nmpc.settings.horizon
+    padded = np.concatenate((ref, np.full(N + 1, ref[-1])))
+    picks = set(np.linspace(len(t) // 4, len(t) - 1, samples).astype(int))
+    cases = []
+    for k in range(len(t)):
+        u_prev = float(adapter.controller._u_last)
+        u = adapter.step(meas, padded[k: k + N + 1])
+        if k in picks:
+            est = adapter.controller.estimator
+            cases.append((est.x.copy(), est.d.copy(), u_prev, padded[k + 1: k + N + 1].copy()))
+        meas = plant.step(u)
+    mpc, state = do_mpc_problem(nmpc)
+    rows = []
+    for x0, d, u_prev, refs in cases:
+        ours, theirs, t_ours, t_theirs = first_inputs(nmpc, mpc, state, x0, d, u_prev, refs)
+        rows.append({"hystmpc": ours, "do_mpc": theirs,
+                     "relative_difference": abs(ours - theirs) / max(abs(theirs), 1e-12),
+                     "hystmpc_ipopt_ms": 1e3 * t_ours, "do_mpc_ms": 1e3 * t_theirs})
+    return {"bench": bench_name, "cases": rows}
+
+
+def time_do_mpc_closed_loop(bench_name: str = "pam", duration: float = 4.0) -> dict:
+    """do-mpc's per-step time over a closed-loop run (the same plant and EKF as hystmpc)."""
+    from experiments.benches import get_bench
+    from experiments.runner import reference_samples
+    bench = get_bench(bench_name)
+    config = bench.defaults()
+    adapter = bench.controllers["nmpc"].build(config)
+    ctl = adapter.controller
+    mpc, state = do_mpc_problem(ctl.nmpc)
+    scenario = bench.scenarios[bench.default_scenario]
+    t, ref = reference_samples(scenario, bench.sample_period, duration)
+    N = ctl.nmpc.settings.horizon
+    padded = np.concatenate((ref, np.full(N + 1, ref[-1])))
+    plant = bench.make_plant(config)
+    meas = plant.reset(0)
+    times, u_last = [], 0.0
+    ctl.reset()
+    est = ctl.estimator
+    z = adapter.sensors(meas)
+    est.reset(np.asarray(ctl.initial_state(z), float), np.zeros(ctl.nmpc.model.nd), ctl.initial_covariance)
+    for k in range(len(t)):
+        if k > 0:
+            est.predict([u_last])
+        est.update(adapter.sensors(meas))
+        state["refs"] = np.concatenate(([padded[k + 1]], padded[k + 1: k + N + 1]))
+        state["d"] = est.d.copy()
+        x0 = np.concatenate((est.x, [u_last]))
+        if k == 0:
+            mpc.x0 = x0
+            mpc.u0 = np.array([u_last])
+            mpc.set_initial_guess()
+        start = time.perf_counter()
+        u = float(np.asarray(mpc.make_step(x0)).ravel()[0])
+        times.append(time.perf_counter() - start)
+        u_last = u
+        meas = plant.step(u)
+    ms = 1e3 * np.asarray(times)
+    return {"bench": bench_name, "steps": len(ms), "step_ms_median": float(np.median(ms)),
+            "step_ms_p95": float(np.percentile(ms, 95)), "ca_version": ca.__version__}

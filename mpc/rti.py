@@ -1,0 +1,100 @@
+"""Real-time iteration: one Gauss–Newton SQP step per sample, as a single CasADi Function.
+
+The tracking cost of :class:`mpc.nmpc.Nmpc` is a sum of squares, ``Σ ‖r(w, p)‖²``, so the
+Gauss–Newton Hessian ``JᵀJ`` is positive semidefinite and needs no convexification. One
+step linearises the shooting and rate constraints at the warm start ``w``, solves the QP
+with qrqp (self-contained C99 when generated), and returns ``w + Δw``. Wrapped as one
+Function ``rti_step(w, p) -> w_next``, the whole step can be code-generated and compiled
+(:func:`compile_function`), which is the ``rti-c`` variant.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import subprocess
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+REGULARISATION = 1e-8
+"""Added to the diagonal of JᵀJ: states enter the cost only through constraints."""
+
+
+def rti_function(residual: ca.Function, constraints: ca.Function, lbg, ubg, lbx, ubx,
+                 name: str = "rti_step") -> ca.Function:
+    """Build ``rti_step(w, p) -> w_next`` from the NLP's residual and constraint functions.
+
+    Parameters
+    ----------
+    residual : casadi.Function
+        ``(w, p) -> r`` with cost ``Σ r²`` (SX).
+    constraints : casadi.Function
+        ``(w, p) -> g`` with ``lbg <= g <= ubg`` (SX).
+    lbg, ubg, lbx, ubx : array_like
+        Constraint and variable bounds (constants baked into the function).
+    """
+    w_sx = ca.SX.sym("w", residual.size1_in(0))
+    p_sx = ca.SX.sym("p", residual.size1_in(1))
+    r = residual(w_sx, p_sx)
+    g = constraints(w_sx, p_sx)
+    J = ca.jacobian(r, w_sx)
+    H = ca.mtimes(J.T, J) + REGULARISATION * ca.SX.eye(w_sx.numel())
+    A = ca.jacobian(g, w_sx)
+    lin = ca.Function("rti_linearise", [w_sx, p_sx], [H, ca.mtimes(J.T, r), A, g])
+    qp = ca.conic(f"{name}_qp", "qrqp", {"h": H.sparsity(), "a": A.sparsity()},
+                  {"print_iter": False, "print_header": False, "error_on_fail": False})
+    w = ca.MX.sym("w", w_sx.numel())
+    p = ca.MX.sym("p", p_sx.numel())
+    H_mx, grad, A_mx, g_mx = lin(w, p)
+    sol = qp(h=H_mx, g=grad, a=A_mx, lba=ca.DM(lbg) - g_mx, uba=ca.DM(ubg) - g_mx,
+             lbx=ca.DM(lbx) - w, ubx=ca.DM(ubx) - w)
+    return ca.Function(name, [w, p], [w + sol["x"]], ["w", "p"], ["w_next"])
+
+
+def cache_dir() -> Path:
+    """Where compiled solvers are kept (``HYSTMPC_CACHE`` or ``~/.cache/hystmpc``)."""
+    return Path(os.environ.get("HYSTMPC_CACHE", Path.home() / ".cache" / "hystmpc"))
+
+
+def compile_function(fun: ca.Function, out_dir: Path | None = None, flags=("-O3",)) -> ca.Function:
+    """Generate C99 for ``fun``, compile it with the system C compiler and load it back.
+
+    Builds are cached by the hash of the generated source and the flags, so the same
+    problem compiles once. Raises ``RuntimeError`` with the compiler's message on failure.
+    """
+    out_dir = Path(out_dir) if out_dir is not None else cache_dir()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    name = fun.name()
+    gen = ca.CodeGenerator(f"{name}.c", {"with_header": True})
+    gen.add(fun)
+    source = _accept_last_qp_iterate(gen.dump())
+    digest = hashlib.sha256((source + " ".join(flags)).encode()).hexdigest()[:16]
+    build = out_dir / f"{name}_{digest}"
+    library = build / f"{name}.so"
+    if not library.exists():
+        build.mkdir(parents=True, exist_ok=True)
+        gen.generate(str(build) + os.sep)
+        (build / f"{name}.c").write_text(source)
+        cmd = ["cc", *flags, "-fPIC", "-shared", f"{name}.c", "-o", f"{name}.so", "-lm"]
+        done = subprocess.run(cmd, cwd=build, capture_output=True, text=True)
+        if done.returncode != 0:
+            raise RuntimeError(f"C compiler failed ({' '.join(cmd)}): {done.stderr.strip()[:2000]}")
+    return ca.external(name, str(library))
+
+
+def _accept_last_qp_iterate(source: str) -> str:
+    """Make generated qrqp return its last iterate when it stops short, as the in-process
+    solver does with ``error_on_fail: False`` (CasADi's C output ignores that option and
+    makes the whole call fail). The RTI step is then the same function in C and in Python."""
+    failing = "  } else if (d.status == QP_NO_SEARCH_DIR) {\n    return 4;\n  } else {\n    return -1;\n  }"
+    patched = source.replace(failing, "  } else {\n    return 0;\n  }")
+    if "QP_NO_SEARCH_DIR) {\n    return 4;" in patched:
+        raise RuntimeError("could not patch the generated qrqp return codes; CasADi's output changed")
+    return patched
+
+
+def least_squares_step(rti: ca.Function, w0, p) -> np.ndarray:
+    """One RTI step from ``w0``; NumPy in and out."""
+    return np.asarray(rti(w0, p)).ravel()

@@ -1,0 +1,60 @@
+"""Real time: RTI step, code-generated C solver round trip, CLI; full set and do-mpc twin (slow)."""
+
+import json
+
+import pytest
+
+from experiments.benches import get_bench
+from experiments.cli import main
+from experiments.realtime import codegen
+
+
+def test_codegen_round_trip_on_compliant(tmp_path):
+    """The compiled RTI step and the in-process one give the same inputs in closed loop, and
+    the standalone C program reproduces the in-process step."""
+    bench = get_bench("compliant")
+    report = codegen(bench, bench.defaults(), tmp_path / "c", verify=True, duration=0.5)
+    assert {"rti_step.c", "rti_step.h", "main.c", "Makefile", "librti_step.so", "rti_main"} <= set(report["files"])
+    assert report["samples"] == 50
+    assert report["max_input_difference"] <= 1e-8
+    assert report["standalone"]["max_output_difference_first_200"] <= 1e-8
+    assert report["standalone"]["median_us"] > 0
+
+
+def test_codegen_and_speed_reject_what_they_cannot_do(capsys, tmp_path):
+    assert main(["codegen", "compliant", "--solver", "ipopt", "--out", str(tmp_path)]) == 2
+    assert "cannot be code-generated yet; allowed: rti" in capsys.readouterr().err
+    assert main(["codegen", "dea", "--out", str(tmp_path)]) == 2
+    assert "not available for single-shooting problems" in capsys.readouterr().err
+    assert main(["speed", "pam", "--variants", "ipopt,fast"]) == 2
+    assert "unknown solver variant 'fast'" in capsys.readouterr().err
+    assert main(["speed", "pam", "--duration", "-1"]) == 2
+
+
+def test_rti_stays_close_to_ipopt_on_a_short_run():
+    from experiments.config import apply_overrides
+    from experiments.runner import simulate
+    bench = get_bench("compliant")
+    scenario = bench.scenarios["sine-1"]
+    rmse = {s: simulate(bench, scenario, "nmpc", apply_overrides(bench.defaults(), [f"nmpc.solver={s}"]),
+                        duration=3.0).metrics["rmse"] for s in ("ipopt", "rti")}
+    assert rmse["rti"] <= 1.1 * rmse["ipopt"], rmse
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("bench_name", ["pam", "compliant"])
+def test_codegen_verify_over_the_whole_default_scenario(tmp_path, bench_name):
+    out = tmp_path / "report.json"
+    assert main(["codegen", bench_name, "--verify", "--out", str(tmp_path / "c"), "--json", str(out), "--quiet"]) == 0
+    report = json.loads(out.read_text())
+    assert report["max_input_difference"] <= 1e-8
+    assert report["standalone"]["max_output_difference_first_200"] <= 1e-8
+
+
+@pytest.mark.slow
+def test_do_mpc_solves_the_same_problem():
+    pytest.importorskip("do_mpc")
+    from experiments.peer import compare_with_do_mpc
+    result = compare_with_do_mpc("pam", samples=3, duration=3.0)
+    for case in result["cases"]:
+        assert case["relative_difference"] <= 1e-4, case
