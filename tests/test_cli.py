@@ -39,7 +39,7 @@ def _csv(tmp_path, text, name="ref.csv"):
     (["run", "pam", "square-10", "--controller", "pi", "--set", "pi.kp"], "expected KEY=VALUE"),
     (["run", "pam", "square-10", "--controller", "pi", "--duration", "-1"], "--duration must be > 0"),
     (["run", "pam", "square-10"], "--controller"),
-    (["speed", "pam"], "invalid choice: 'speed'"),
+    (["frobnicate", "pam"], "invalid choice: 'frobnicate'"),
 ])
 def test_bad_usage_exits_2_with_one_line(capsys, argv, needle):
     code, out, err = _run(capsys, argv)
