@@ -1,4 +1,4 @@
-"""``hystmpc`` command line (interface.md): list, run, compare, identify, codegen, speed.
+"""``hystmpc`` command line (interface.md): list, run, compare, sweep, identify, codegen, speed.
 
 Exit codes: 0 success; 2 bad usage or bad input, with one line naming what is wrong and
 what is allowed; 1 anything else.
@@ -59,6 +59,19 @@ def build_parser() -> argparse.ArgumentParser:
     p_cmp.add_argument("scenarios", nargs="*", help="default: all of the bench's scenarios")
     p_cmp.add_argument("--controllers", help="comma-separated (default: all of the bench's)")
     _add_run_options(p_cmp)
+    p_sw = sub.add_parser("sweep", help="many runs: scenarios × controllers × seeds × plant perturbations")
+    p_sw.add_argument("spec", metavar="SPEC.toml", help="sweep spec (interface.md)")
+    p_sw.add_argument("--workers", type=int, help=f"worker processes (default: the core count, {os.cpu_count()})")
+    p_sw.add_argument("--executor", default="local", help="local (process pool, default) or dask")
+    p_sw.add_argument("--scheduler", metavar="ADDR", help="address of a running Dask scheduler (with --executor dask)")
+    p_sw.add_argument("--resume", action="store_true", help="finish the sweep in --out, skipping recorded runs")
+    p_sw.add_argument("--out", help="results folder (default results/<bench>/sweep-<timestamp>)")
+    p_sw.add_argument("--json", dest="json_file", help="also write the summary to this file")
+    p_sw.add_argument("--duration", type=float, help="run length in seconds (default: the spec's, else the scenario's)")
+    p_sw.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                      help="parameter override for every run, after the spec's own 'set'")
+    p_sw.add_argument("--no-plots", action="store_true", help="skip the figures")
+    p_sw.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p_cg = sub.add_parser("codegen", help="write, build and load the C solver of a bench's NMPC")
     p_cg.add_argument("bench", help=f"one of {', '.join(BENCH_NAMES)}")
     p_cg.add_argument("--solver", default="rti", help="rti (the only code-generated variant so far)")
@@ -165,6 +178,38 @@ def _speed(args) -> int:
     if not args.quiet:
         print(table)
         print(f"\nresults: {out / 'speed.json'}")
+    return 0
+
+
+EXECUTORS = ("local", "dask")
+
+
+def _sweep(args) -> int:
+    from experiments.sweep import SpecError, load_spec, run_sweep, summary_table
+    _positive_duration(args.duration)
+    if args.executor not in EXECUTORS:
+        raise UsageError(f"unknown executor {args.executor!r}; allowed: {', '.join(EXECUTORS)}")
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers must be >= 1, got {args.workers}")
+    if args.resume and not args.out:
+        raise UsageError("--resume needs --out DIR: the folder of the sweep to finish")
+    try:
+        spec = load_spec(args.spec, args.overrides, args.duration)
+        out = Path(args.out) if args.out else Path("results") / spec.bench / ("sweep-" + dt.datetime.now(
+            dt.UTC).strftime("%Y%m%dT%H%M%SZ"))
+        outcome = run_sweep(spec, out, workers=args.workers, executor=args.executor, scheduler=args.scheduler,
+                            resume=args.resume, plots=not args.no_plots, quiet=args.quiet,
+                            spec_text=Path(args.spec).read_text())
+    except SpecError as exc:
+        raise UsageError(str(exc)) from None
+    if args.json_file:
+        Path(args.json_file).write_text(json.dumps(outcome.summary, indent=1) + "\n")
+    if not args.quiet:
+        print(summary_table(outcome.summary, _bench(spec.bench).units))
+        print(f"\n{outcome.ran} runs done in {outcome.wall_s:.1f} s ({outcome.skipped} already recorded), "
+              f"{outcome.summary['runs_failed']} failed in all; results: {out / 'summary.json'}")
+        if outcome.figures:
+            print("figures: " + ", ".join(str(f) for f in outcome.figures))
     return 0
 
 
@@ -283,6 +328,8 @@ def main(argv: list[str] | None = None) -> int:
             return _codegen(args)
         if args.command == "speed":
             return _speed(args)
+        if args.command == "sweep":
+            return _sweep(args)
         bench = _bench(args.bench)
         if args.command == "run":
             _check_names("scenario", [args.scenario], bench.scenarios)

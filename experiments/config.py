@@ -83,3 +83,14 @@ def apply_overrides(config: dict[str, Any], assignments: list[str]) -> dict[str,
 def describe(config: dict[str, Any]) -> dict[str, Any]:
     """JSON-ready dump of every parameter group (recorded with each result)."""
     return {group: dataclasses.asdict(obj) for group, obj in config.items()}
+
+
+def get_value(config: dict[str, Any], key: str) -> Any:
+    """The current value of a ``group.field`` (or ``group.field.sub``) key."""
+    if key not in allowed_keys(config):
+        raise ValueError(f"unknown key {key!r}; allowed: {', '.join(allowed_keys(config))}")
+    group, *path = key.split(".")
+    value = config[group]
+    for name in path:
+        value = getattr(value, name)
+    return value

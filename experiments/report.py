@@ -49,15 +49,15 @@ def results_document(bench: Bench, runs: list[RunResult], command: list[str] | N
            "version": version(), "runs": [run_entry(bench, r) for r in runs]}
     if command is not None:
         doc["command"] = command
-    return _finite(doc)
+    return json_safe(doc)
 
 
-def _finite(obj):
+def json_safe(obj):
     """Replace NaN/inf by None so the document is strict JSON."""
     if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
+        return {k: json_safe(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
+        return [json_safe(v) for v in obj]
     if isinstance(obj, (float, np.floating)):
         return float(obj) if np.isfinite(obj) else None
     if isinstance(obj, np.integer):
