@@ -84,7 +84,8 @@ def build_parser() -> argparse.ArgumentParser:
     p_cg.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p_sp = sub.add_parser("speed", help="per-step compute of every solver variant on the default scenario")
     p_sp.add_argument("bench", help=f"one of {', '.join(BENCH_NAMES)}")
-    p_sp.add_argument("--variants", default="ipopt,sqp,rti,rti-c", help="comma-separated solver variants")
+    p_sp.add_argument("--variants", help="comma-separated solver variants (default: the bench's own solver, "
+                      "then ipopt, sqp, rti, rti-c)")
     p_sp.add_argument("--duration", type=float, help="run length (s, default: the scenario's)")
     p_sp.add_argument("--out", help="results folder (default results/<bench>/speed-<timestamp>)")
     p_sp.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
@@ -160,10 +161,14 @@ def _speed(args) -> int:
     from experiments.realtime import speed, speed_table
     from experiments.report import version
     bench = _bench(args.bench)
-    variants = args.variants.split(",")
-    _check_names("solver variant", variants, [v for v in SOLVERS if v != "gn"])
     _positive_duration(args.duration)
     config = _config(bench, args.overrides)
+    if args.variants:
+        variants = args.variants.split(",")
+        _check_names("solver variant", variants, SOLVERS)
+    else:
+        own = config["nmpc"].solver if "nmpc" in config else "ipopt"
+        variants = list(dict.fromkeys([own, "ipopt", "sqp", "rti", "rti-c"]))
     out = Path(args.out) if args.out else Path("results") / bench.name / ("speed-" + dt.datetime.now(
         dt.UTC).strftime("%Y%m%dT%H%M%SZ"))
     try:

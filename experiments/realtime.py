@@ -109,11 +109,16 @@ class RecordingStep:
         return self.fun(w0, p)
 
 
+def _inner(controller):
+    """The NMPC controller behind a bench adapter (``NmpcAdapter``) or the controller itself."""
+    return getattr(controller, "controller", controller)
+
+
 def _nmpc_of(controller):
-    try:
-        return controller.controller.nmpc
-    except AttributeError:
-        raise ValueError("this bench's nmpc has no multiple-shooting RTI step") from None
+    nmpc = getattr(_inner(controller), "nmpc", None)
+    if getattr(nmpc, "rti", None) is None:
+        raise ValueError("this bench's nmpc has no RTI step")
+    return nmpc
 
 
 def _rti_config(bench: Bench, config: dict, solver: str) -> dict:
@@ -209,7 +214,7 @@ def speed(bench: Bench, config: dict, variants, duration: float | None = None, o
         start = time.perf_counter()
         run = simulate(replace(bench, controllers={**bench.controllers, "nmpc": spec}), scenario, "nmpc", cfg,
                        duration=duration)
-        solve_ms = 1e3 * np.asarray(getattr(controller.controller, "solve_times", [np.nan]))
+        solve_ms = 1e3 * np.asarray(getattr(_inner(controller), "solve_times", [np.nan]))
         rows.append({"variant": variant, "rmse": run.metrics["rmse"], **run.timing,
                      "solve_ms_median": float(np.median(solve_ms)), "solve_ms_p95": float(np.percentile(solve_ms, 95)),
                      "solve_ms_max": float(np.max(solve_ms)), "failures": run.solver["failures"],

@@ -48,10 +48,14 @@ class NmpcSettings:
     0: same as ``eps``. Must be well below the input change per sample."""
     warm_multipliers: bool = False
     """IPOPT only: also start from the previous solve's multipliers (warm_start_init_point)."""
+    rti_iterations: int = 1
+    """rti/rti-c only: Gauss–Newton steps per sample (1 is the classic real-time iteration)."""
 
     def __post_init__(self):
         if self.horizon < 2:
             raise ValueError(f"horizon must be >= 2, got {self.horizon}")
+        if self.rti_iterations < 1:
+            raise ValueError(f"rti_iterations must be >= 1, got {self.rti_iterations}")
         if self.solver not in SOLVERS:
             raise ValueError(f"solver {self.solver!r} is unknown; allowed: {', '.join(SOLVERS)}")
         if self.warm_start not in WARM_STARTS:
@@ -109,7 +113,7 @@ class Nmpc:
             raise ValueError(f"need u_min < u_max and du_max > 0, got {u_min}, {u_max}, {du_max}")
         if settings.solver == "gn":
             raise ValueError("solver 'gn' is only available for single-shooting problems; "
-                             "allowed here: ipopt, sqp")
+                             "allowed here: ipopt, sqp, rti, rti-c")
         self.model = model
         self.settings = settings
         self.u_min, self.u_max, self.du_max = float(u_min), float(u_max), float(du_max)
@@ -202,11 +206,14 @@ class Nmpc:
         w0 = np.concatenate((np.asarray(x_guess, float).ravel(), u_guess))
         if self._solver is None:  # RTI: one Gauss–Newton step from the warm start
             start = time.perf_counter()
-            w = np.asarray(self.rti(w0, p)).ravel()
+            w = w0
+            for _ in range(self.settings.rti_iterations):
+                w = np.asarray(self.rti(w, p)).ravel()
             elapsed = time.perf_counter() - start
             ok = bool(np.all(np.isfinite(w)))
             return NmpcStep(u_plan=w[self._n_shoot:].reshape(N, 1), x_plan=w[: self._n_shoot].reshape(N + 1, nx),
-                            success=ok, status="RTI_Step" if ok else "RTI_Non_Finite", iterations=1,
+                            success=ok, status="RTI_Step" if ok else "RTI_Non_Finite",
+                            iterations=self.settings.rti_iterations,
                             solve_time=elapsed)
         args = {"x0": w0, "p": p, "lbx": self._lbx, "ubx": self._ubx, "lbg": self._lbg, "ubg": self._ubg}
         if self.settings.warm_multipliers and self._lam is not None and x_guess is not None:

@@ -27,7 +27,7 @@ class SingleShootingNmpc:
     predict : casadi.Function
         ``(p, U) -> Y`` with ``U`` and ``Y`` of length ``settings.horizon``.
     settings : NmpcSettings
-        Horizon, weights, solver (``ipopt`` or ``sqp``), iterations, tolerance.
+        Horizon, weights, solver (``ipopt``, ``sqp``, ``gn``, ``rti``, ``rti-c``), iterations, tolerance.
     u_min, u_max, du_max : float
         Input bounds and largest change per sample (``inf`` for none).
     """
@@ -35,9 +35,6 @@ class SingleShootingNmpc:
     def __init__(self, predict: ca.Function, settings: NmpcSettings, u_min: float, u_max: float,
                  du_max: float = np.inf):
         N = settings.horizon
-        if settings.solver in ("rti", "rti-c"):
-            raise ValueError(f"solver {settings.solver!r} is not available for single-shooting problems; "
-                             "allowed here: ipopt, sqp, gn")
         if predict.size1_in(1) != N or predict.size1_out(0) != N:
             raise ValueError(f"predict must map {N} inputs to {N} outputs, "
                              f"got {predict.size1_in(1)} → {predict.size1_out(0)}")
@@ -61,8 +58,12 @@ class SingleShootingNmpc:
         self._bounds = {"lbx": np.full(N, self.u_min), "ubx": np.full(N, self.u_max),
                         "lbg": np.full(n_g, -self.du_max), "ubg": np.full(n_g, self.du_max)}
         self._lam = None
+        self.rti = None
         if settings.solver == "gn":
             self._build_gauss_newton(U, p, u_prev, ref, u_ff, y, du)
+            return
+        if settings.solver in ("rti", "rti-c"):
+            self._build_rti(U, p, u_prev, ref, u_ff, y, du)
             return
         nlp = {"x": U, "f": cost, "g": du if rate_bounded else ca.SX(0, 1),
                "p": ca.vertcat(p, u_prev, ref, u_ff)}
@@ -94,6 +95,19 @@ class SingleShootingNmpc:
         self._A = np.asarray(A)
         self._qp = ca.conic("gn_qp", "qrqp", {"h": H, "a": ca.DM(A).sparsity()},
                             {"print_iter": False, "print_header": False, "error_on_fail": False})
+
+    def _build_rti(self, U, p, u_prev, ref, u_ff, y, du) -> None:
+        """One Gauss–Newton step per sample as one Function (``rti``), compiled for ``rti-c``."""
+        from mpc.rti import compile_function, rti_function
+        s = self.settings
+        params = ca.vertcat(p, u_prev, ref, u_ff)
+        residual = ca.Function("residual", [U, params], [ca.vertcat(
+            np.sqrt(s.q_output) * (y - ref), np.sqrt(s.r_rate) * du, np.sqrt(s.r_input) * (U - u_ff))])
+        constraints = ca.Function("constraints", [U, params], [du if self._rate_bounded else ca.SX(0, 1)])
+        b = self._bounds
+        self.rti = rti_function(residual, constraints, b["lbg"], b["ubg"], b["lbx"], b["ubx"])
+        if s.solver == "rti-c":
+            self.rti = compile_function(self.rti)
 
     def _solve_gauss_newton(self, u, p):
         """Gauss–Newton SQP: QP on JᵀJ, backtracking on the cost; returns (u, ok, status, iters)."""
@@ -134,6 +148,18 @@ class SingleShootingNmpc:
         u_guess = np.clip(np.asarray(u_guess, float).ravel(), self.u_min, self.u_max)
         u_ff = u_guess if u_ff is None else np.asarray(u_ff, float).ravel()
         p = np.concatenate((np.asarray(params, float).ravel(), [u_prev], np.asarray(ref, float).ravel(), u_ff))
+        if self.rti is not None:  # RTI: one Gauss–Newton step from the (shifted) warm start
+            start = time.perf_counter()
+            u = u_guess
+            for _ in range(self.settings.rti_iterations):
+                u = np.asarray(self.rti(u, p)).ravel()
+            elapsed = time.perf_counter() - start
+            success, status, iterations = bool(np.all(np.isfinite(u))), "RTI_Step", self.settings.rti_iterations
+            if not success:
+                status = "RTI_Non_Finite"
+            y = np.asarray(self.predict(params, u)).ravel() if success else np.full(N, np.nan)
+            return NmpcStep(u_plan=u.reshape(N, 1), x_plan=y.reshape(N, 1), success=success, status=status,
+                            iterations=iterations, solve_time=elapsed)
         if self.settings.solver == "gn":
             start = time.perf_counter()
             u, success, status, iterations = self._solve_gauss_newton(u_guess, p)

@@ -24,11 +24,15 @@ def test_codegen_round_trip_on_compliant(tmp_path):
 def test_codegen_and_speed_reject_what_they_cannot_do(capsys, tmp_path):
     assert main(["codegen", "compliant", "--solver", "ipopt", "--out", str(tmp_path)]) == 2
     assert "cannot be code-generated yet; allowed: rti" in capsys.readouterr().err
-    assert main(["codegen", "dea", "--out", str(tmp_path)]) == 2
-    assert "not available for single-shooting problems" in capsys.readouterr().err
+    assert main(["codegen", "dea", "--solver", "sqp", "--out", str(tmp_path)]) == 2
+    assert "allowed: rti" in capsys.readouterr().err
     assert main(["speed", "pam", "--variants", "ipopt,fast"]) == 2
     assert "unknown solver variant 'fast'" in capsys.readouterr().err
     assert main(["speed", "pam", "--duration", "-1"]) == 2
+    assert main(["speed", "pam", "--variants", "gn", "--duration", "0.1"]) == 2
+    assert "'gn' is only available for single-shooting problems" in capsys.readouterr().err
+    assert main(["speed", "pam", "--set", "nmpc.rti_iterations=0"]) == 2
+    assert "rti_iterations must be >= 1, got 0" in capsys.readouterr().err
 
 
 def test_rti_stays_close_to_ipopt_on_a_short_run():
@@ -42,7 +46,7 @@ def test_rti_stays_close_to_ipopt_on_a_short_run():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("bench_name", ["pam", "compliant"])
+@pytest.mark.parametrize("bench_name", ["pam", "compliant", "reluctance", "dea"])
 def test_codegen_verify_over_the_whole_default_scenario(tmp_path, bench_name):
     out = tmp_path / "report.json"
     assert main(["codegen", bench_name, "--verify", "--out", str(tmp_path / "c"), "--json", str(out), "--quiet"]) == 0

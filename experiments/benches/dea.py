@@ -483,8 +483,14 @@ class DeaNmpc:
         self._started = False
         self.failures = 0
         self.iterations: list[int] = []
+        self.solve_times: list[float] = []
         self.statuses: dict[str, int] = {}
         self.predicted_output = float("nan")
+
+    @property
+    def nmpc(self) -> SingleShootingNmpc:
+        """The NLP (its ``rti`` step is what ``hystmpc codegen`` generates)."""
+        return self.ocp
 
     def _inverse(self, hist, refs, d) -> np.ndarray:
         m = self.model
@@ -516,6 +522,7 @@ class DeaNmpc:
         params = np.concatenate((self._kp, x, [d], hist))
         result = self.ocp.solve(params, self._u, refs, guess)
         self.iterations.append(result.iterations)
+        self.solve_times.append(result.solve_time)
         self.statuses[result.status] = self.statuses.get(result.status, 0) + 1
         if result.success:
             u = float(result.u_plan[0, 0])
