@@ -206,6 +206,11 @@ def scaled_assignments(config: dict[str, Any], factors: dict[str, float]) -> lis
     return assignments
 
 
+def run_id(scenario: str, controller: str, seed: int, sample: int) -> str:
+    """Name of a run's record: ``<scenario>__<controller>__s<seed>__p<sample>``."""
+    return f"{scenario}__{controller}__s{seed}__p{sample:04d}"
+
+
 def make_tasks(spec: SweepSpec) -> list[RunTask]:
     """Every run of the sweep, in a fixed order."""
     from experiments.benches import get_bench
@@ -218,9 +223,8 @@ def make_tasks(spec: SweepSpec) -> list[RunTask]:
         for scenario in spec.scenarios:
             for seed in spec.seeds:
                 for controller in spec.controllers:
-                    run_id = f"{scenario}__{controller}__s{seed}__p{sample:04d}"
-                    tasks.append(RunTask(run_id, spec.bench, scenario, controller, seed, sample, overrides,
-                                         factors, spec.duration))
+                    tasks.append(RunTask(run_id(scenario, controller, seed, sample), spec.bench, scenario,
+                                         controller, seed, sample, overrides, factors, spec.duration))
     return tasks
 
 
@@ -364,7 +368,7 @@ def summarize(spec: SweepSpec, records: dict[str, dict[str, Any]], metric: str =
 
 def _win_rates(spec, records, metric, baselines, scenarios) -> dict[str, Any]:
     def value(scenario, controller, seed, sample):
-        r = records.get(f"{scenario}__{controller}__s{seed}__p{sample:04d}")
+        r = records.get(run_id(scenario, controller, seed, sample))
         if r is None:
             return None  # not run yet
         return r["metrics"][metric] if r["status"] == "ok" else math.inf
@@ -470,7 +474,7 @@ def sweep_figures(spec: SweepSpec, records: dict[str, dict[str, Any]], out: Path
             xs, ys = [], []
             for seed in spec.seeds:
                 for sample in range(spec.samples):
-                    rs = [records.get(f"{scenario}__{c}__s{seed}__p{sample:04d}") for c in spec.controllers]
+                    rs = [records.get(run_id(scenario, c, seed, sample)) for c in spec.controllers]
                     if all(r is not None and r["status"] == "ok" for r in rs):
                         values = {c: r["metrics"]["rmse"] for c, r in zip(spec.controllers, rs, strict=True)}
                         xs.append(min(values[b] for b in baselines))
