@@ -23,7 +23,7 @@ REGULARISATION = 1e-8
 
 
 def rti_function(residual: ca.Function, constraints: ca.Function, lbg, ubg, lbx, ubx,
-                 name: str = "rti_step") -> ca.Function:
+                 name: str = "rti_step", step_lengths: tuple[float, ...] = ()) -> ca.Function:
     """Build ``rti_step(w, p) -> w_next`` from the NLP's residual and constraint functions.
 
     Parameters
@@ -34,6 +34,11 @@ def rti_function(residual: ca.Function, constraints: ca.Function, lbg, ubg, lbx,
         ``(w, p) -> g`` with ``lbg <= g <= ubg`` (SX).
     lbg, ubg, lbx, ubx : array_like
         Constraint and variable bounds (constants baked into the function).
+    step_lengths : tuple of float, optional
+        If given, the step taken is the one of ``1`` and these fractions with the lowest cost
+        (a fixed backtracking, code-generatable). Only sound where every constraint is
+        convex in ``w``, so that a shortened QP step stays feasible: single shooting with
+        linear constraints, not multiple shooting.
     """
     w_sx = ca.SX.sym("w", residual.size1_in(0))
     p_sx = ca.SX.sym("p", residual.size1_in(1))
@@ -50,7 +55,18 @@ def rti_function(residual: ca.Function, constraints: ca.Function, lbg, ubg, lbx,
     H_mx, grad, A_mx, g_mx = lin(w, p)
     sol = qp(h=H_mx, g=grad, a=A_mx, lba=ca.DM(lbg) - g_mx, uba=ca.DM(ubg) - g_mx,
              lbx=ca.DM(lbx) - w, ubx=ca.DM(ubx) - w)
-    return ca.Function(name, [w, p], [w + sol["x"]], ["w", "p"], ["w_next"])
+    step = sol["x"]
+    w_next = w + step
+    if step_lengths:
+        cost = ca.Function("rti_cost", [w_sx, p_sx], [ca.sumsqr(r)])
+        best_cost = cost(w_next, p)
+        for t in step_lengths:
+            trial = w + t * step
+            trial_cost = cost(trial, p)
+            better = trial_cost < best_cost
+            w_next = ca.if_else(better, trial, w_next)
+            best_cost = ca.if_else(better, trial_cost, best_cost)
+    return ca.Function(name, [w, p], [w_next], ["w", "p"], ["w_next"])
 
 
 def cache_dir() -> Path:

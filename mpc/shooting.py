@@ -105,7 +105,9 @@ class SingleShootingNmpc:
             np.sqrt(s.q_output) * (y - ref), np.sqrt(s.r_rate) * du, np.sqrt(s.r_input) * (U - u_ff))])
         constraints = ca.Function("constraints", [U, params], [du if self._rate_bounded else ca.SX(0, 1)])
         b = self._bounds
-        self.rti = rti_function(residual, constraints, b["lbg"], b["ubg"], b["lbx"], b["ubx"])
+        # the constraints are linear in U, so a shortened step stays feasible: backtrack as gn does
+        self.rti = rti_function(residual, constraints, b["lbg"], b["ubg"], b["lbx"], b["ubx"],
+                                step_lengths=(0.5, 0.25, 0.125))
         if s.solver == "rti-c":
             self.rti = compile_function(self.rti)
 

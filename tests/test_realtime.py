@@ -62,3 +62,17 @@ def test_do_mpc_solves_the_same_problem():
     result = compare_with_do_mpc("pam", samples=3, duration=3.0)
     for case in result["cases"]:
         assert case["relative_difference"] <= 1e-4, case
+
+
+def test_rti_step_lengths_take_the_best_of_the_shortened_steps():
+    """An overshooting Gauss–Newton step (r = w³ − 1 from w = 0.1) is cut back to the best trial."""
+    import casadi as ca
+
+    from mpc.rti import rti_function
+    w, p = ca.SX.sym("w"), ca.SX.sym("p")
+    residual = ca.Function("r", [w, p], [w**3 - 1])
+    constraints = ca.Function("g", [w, p], [ca.SX(0, 1)])
+    full = rti_function(residual, constraints, [], [], [-10.0], [10.0])
+    searched = rti_function(residual, constraints, [], [], [-10.0], [10.0], step_lengths=(0.5, 0.25, 0.125))
+    assert float(full(0.1, 0)) == pytest.approx(10.0)  # the QP step, clipped at the bound
+    assert float(searched(0.1, 0)) == pytest.approx(0.1 + 0.125 * 9.9)  # lowest cost of 10, 5.05, 2.575, 1.3375
