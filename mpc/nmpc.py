@@ -204,7 +204,7 @@ class Nmpc:
         p = np.concatenate((np.asarray(x0, float).ravel(), np.asarray(d, float).ravel(), [u_prev],
                             np.asarray(ref, float).ravel(), u_ff))
         w0 = np.concatenate((np.asarray(x_guess, float).ravel(), u_guess))
-        if self._solver is None:  # RTI: one Gauss–Newton step from the warm start
+        if self._solver is None:  # RTI: rti_iterations Gauss–Newton steps from the warm start
             start = time.perf_counter()
             w = w0
             for _ in range(self.settings.rti_iterations):

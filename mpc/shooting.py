@@ -59,11 +59,14 @@ class SingleShootingNmpc:
                         "lbg": np.full(n_g, -self.du_max), "ubg": np.full(n_g, self.du_max)}
         self._lam = None
         self.rti = None
-        if settings.solver == "gn":
-            self._build_gauss_newton(U, p, u_prev, ref, u_ff, y, du)
-            return
-        if settings.solver in ("rti", "rti-c"):
-            self._build_rti(U, p, u_prev, ref, u_ff, y, du)
+        if settings.solver in ("gn", "rti", "rti-c"):  # Gauss–Newton: the cost as a sum of squares
+            params = ca.vertcat(p, u_prev, ref, u_ff)
+            residual = ca.vertcat(np.sqrt(settings.q_output) * (y - ref), np.sqrt(settings.r_rate) * du,
+                                  np.sqrt(settings.r_input) * (U - u_ff))
+            if settings.solver == "gn":
+                self._build_gauss_newton(U, params, residual)
+            else:
+                self._build_rti(U, params, residual, du)
             return
         nlp = {"x": U, "f": cost, "g": du if rate_bounded else ca.SX(0, 1),
                "p": ca.vertcat(p, u_prev, ref, u_ff)}
@@ -83,11 +86,8 @@ class SingleShootingNmpc:
                     "print_time": False, "record_time": True, "error_on_fail": False}
             self._solver = ca.nlpsol("nmpc_ss", "sqpmethod", nlp, opts)
 
-    def _build_gauss_newton(self, U, p, u_prev, ref, u_ff, y, du) -> None:
-        s, N = self.settings, self.settings.horizon
-        residual = ca.vertcat(np.sqrt(s.q_output) * (y - ref), np.sqrt(s.r_rate) * du,
-                              np.sqrt(s.r_input) * (U - u_ff))
-        params = ca.vertcat(p, u_prev, ref, u_ff)
+    def _build_gauss_newton(self, U, params, residual) -> None:
+        N = self.settings.horizon
         J = ca.jacobian(residual, U)
         self._gn_eval = ca.Function("gn_eval", [U, params], [residual, J])
         H = ca.Sparsity.dense(N, N)
@@ -96,19 +96,16 @@ class SingleShootingNmpc:
         self._qp = ca.conic("gn_qp", "qrqp", {"h": H, "a": ca.DM(A).sparsity()},
                             {"print_iter": False, "print_header": False, "error_on_fail": False})
 
-    def _build_rti(self, U, p, u_prev, ref, u_ff, y, du) -> None:
+    def _build_rti(self, U, params, residual, du) -> None:
         """One Gauss–Newton step per sample as one Function (``rti``), compiled for ``rti-c``."""
         from mpc.rti import compile_function, rti_function
-        s = self.settings
-        params = ca.vertcat(p, u_prev, ref, u_ff)
-        residual = ca.Function("residual", [U, params], [ca.vertcat(
-            np.sqrt(s.q_output) * (y - ref), np.sqrt(s.r_rate) * du, np.sqrt(s.r_input) * (U - u_ff))])
+        residual = ca.Function("residual", [U, params], [residual])
         constraints = ca.Function("constraints", [U, params], [du if self._rate_bounded else ca.SX(0, 1)])
         b = self._bounds
         # the constraints are linear in U, so a shortened step stays feasible: backtrack as gn does
         self.rti = rti_function(residual, constraints, b["lbg"], b["ubg"], b["lbx"], b["ubx"],
                                 step_lengths=(0.5, 0.25, 0.125))
-        if s.solver == "rti-c":
+        if self.settings.solver == "rti-c":
             self.rti = compile_function(self.rti)
 
     def _solve_gauss_newton(self, u, p):
