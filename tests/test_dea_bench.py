@@ -5,7 +5,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from experiments.benches.dea import BENCH, NOMINAL, prediction_function
+from experiments.benches.dea import BENCH, NOMINAL, PAPER_TABLE_2, prediction_function
 from experiments.runner import simulate
 from models.fckp import Fckp
 from plants.dea import DeaActuator
@@ -83,7 +83,20 @@ def test_full_comparison_orderings_and_nmpc():
             rmse[scenario, controller] = run.metrics["rmse"]
     ss = {c: rmse["single-sine", c] for c in BENCH.controllers}
     assert ss["bic"] < ss["backstepping"] < ss["pid"] and ss["linear-mpc"] < ss["pid"]
+    assert ss["bic"] <= 3 * PAPER_TABLE_2["bic"][1]
     for scenario in ("single-sine", "composite"):
         assert rmse[scenario, "nmpc"] <= 0.5 * rmse[scenario, "bic"]
     for scenario in BENCH.scenarios:
         assert rmse[scenario, "nmpc"] == min(rmse[scenario, c] for c in BENCH.controllers), scenario
+
+
+@pytest.mark.slow
+def test_the_plants_creep_causes_almost_none_of_bics_error_on_composite():
+    """Why Table 3 (creep compensation: 0.0235 -> 0.0133 mm) cannot be reproduced: even a
+    creep-free plant leaves bic's RMSE within a few per cent of what it is with creep."""
+    from experiments.config import apply_overrides
+    config = BENCH.defaults()
+    with_creep = simulate(BENCH, BENCH.scenarios["composite"], "bic", config).metrics["rmse"]
+    creep_free = apply_overrides(config, ["plant.fckp.creep_order=0"])
+    without_creep = simulate(BENCH, BENCH.scenarios["composite"], "bic", creep_free).metrics["rmse"]
+    assert abs(with_creep - without_creep) < 0.05 * with_creep  # Table 3 is a 43 % cut
