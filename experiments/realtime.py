@@ -24,7 +24,7 @@ from mpc.rti import _accept_last_qp_iterate
 
 MAIN_C = r"""/* Replays recorded RTI inputs through rti_step without Python; prints timings.
    Input file: first line "n_w n_p count", then count lines of n_w + n_p numbers (w0, p).
-   Output file: one line of n_w numbers (w_next) per input line.
+   Output file: one line of n_w numbers (w_next) per input line; qp_error is not written.
    Usage: rti_main INPUTS OUTPUTS [repeats] -> stdout: median, p95 and max per call (µs). */
 #include <stdio.h>
 #include <stdlib.h>
@@ -55,6 +55,7 @@ int main(int argc, char** argv) {
   casadi_real* w = malloc(sizeof(casadi_real) * (sz_w > 0 ? sz_w : 1));
   double* out = malloc(sizeof(double) * count * n_w);
   double* us = malloc(sizeof(double) * count * repeats);
+  for (casadi_int i = 0; i < sz_res; ++i) res[i] = 0; /* only w_next is written */
   rti_step_incref();
   int mem = rti_step_checkout();
   for (int r = 0; r < repeats; ++r) {
@@ -189,7 +190,7 @@ def codegen(bench: Bench, config: dict, out: Path, verify: bool, duration: float
         if label == "in-process":
             recorded = np.asarray(nmpc.rti.calls)
             n_w = nmpc.rti.fun.size1_in(0)
-            in_process_out = np.array([np.asarray(nmpc.rti.fun(c[:n_w], c[n_w:])).ravel() for c in recorded[:200]])
+            in_process_out = np.array([np.asarray(nmpc.rti.fun(c[:n_w], c[n_w:])[0]).ravel() for c in recorded[:200]])
     diff = float(np.max(np.abs(results["in-process"].input - results["compiled"].input)))
     program_out, timing = run_program(out, recorded, n_w, repeats=3)
     program_diff = float(np.max(np.abs(program_out[:200] - in_process_out)))

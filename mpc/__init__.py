@@ -5,6 +5,8 @@
 * :class:`mpc.estimator.DisturbanceEKF`: extended Kalman filter on ``[x; d]``.
 * :class:`mpc.nmpc.Nmpc`: multiple-shooting tracking NLP (IPOPT by default).
 * :class:`mpc.controller.NmpcController`: estimator + NLP + warm starts + fallback.
+* :mod:`mpc.rti`: the real-time iteration step as one code-generatable Function;
+  :mod:`mpc.qp`: the interior-point QP it uses; :mod:`mpc.shooting`: single shooting.
 """
 
 from mpc.controller import NmpcController

@@ -140,6 +140,8 @@ class NmpcController:
             return np.full(N, self._u_last), None
         u_prev = self._plan.u_plan[:, 0]
         u_guess = np.concatenate((u_prev[1:], u_prev[-1:]))
+        if getattr(self.nmpc, "condensed", False):  # the condensed RTI step rolls out the states itself
+            return u_guess, None
         x_prev = self._plan.x_plan
         x_tail = np.asarray(self.nmpc.model.step(x_prev[-1], u_prev[-1], d)).ravel()
         x_guess = np.vstack((x_prev[1:], x_tail))

@@ -12,9 +12,10 @@ from mpc.model import PredictionModel
 
 SOLVERS = ("ipopt", "sqp", "rti", "rti-c", "gn")
 """Solver variants: IPOPT (robust default); CasADi sqpmethod + qrqp; ``rti``, one Gauss–Newton
-SQP step per sample as one CasADi Function (:mod:`mpc.rti`); ``rti-c``, the same generated
-as C, compiled and loaded; ``gn``, Gauss–Newton SQP to convergence (single-shooting problems
-only, :mod:`mpc.shooting`)."""
+SQP step per sample as one CasADi Function (:mod:`mpc.rti`; condensed onto the inputs, with
+the interior-point QP of :mod:`mpc.qp`); ``rti-c``, the same generated as C, compiled and
+loaded; ``gn``, Gauss–Newton SQP to convergence (single-shooting problems only,
+:mod:`mpc.shooting`)."""
 WARM_STARTS = ("inverse", "shift", "cold")
 
 
@@ -50,12 +51,20 @@ class NmpcSettings:
     """IPOPT only: also start from the previous solve's multipliers (warm_start_init_point)."""
     rti_iterations: int = 1
     """rti/rti-c only: Gauss–Newton steps per sample (1 is the classic real-time iteration)."""
+    rti_condensed: bool = True
+    """rti/rti-c on multiple-shooting problems: eliminate the states by a rollout inside the
+    step, so the QP has the N inputs only and the step backtracks on the cost; false: the
+    QP over states and inputs with the shooting gaps as constraints, full step."""
+    rti_qp_iterations: int = 30
+    """Interior-point iterations of the condensed RTI step's QP (fixed: real time)."""
 
     def __post_init__(self):
         if self.horizon < 2:
             raise ValueError(f"horizon must be >= 2, got {self.horizon}")
         if self.rti_iterations < 1:
             raise ValueError(f"rti_iterations must be >= 1, got {self.rti_iterations}")
+        if self.rti_qp_iterations < 10:
+            raise ValueError(f"rti_qp_iterations must be >= 10, got {self.rti_qp_iterations}")
         if self.solver not in SOLVERS:
             raise ValueError(f"solver {self.solver!r} is unknown; allowed: {', '.join(SOLVERS)}")
         if self.warm_start not in WARM_STARTS:
@@ -170,11 +179,45 @@ class Nmpc:
         self._ubx = np.concatenate((np.inf * np.ones(n_shoot), self.u_max * np.ones(N)))
         self._n_shoot = n_shoot
         self._lam = None
+        self.condensed = s.solver in ("rti", "rti-c") and s.rti_condensed
         if s.solver in ("rti", "rti-c"):
             from mpc.rti import compile_function, rti_function
-            self.rti = rti_function(self.residual, self.constraints, self._lbg, self._ubg, self._lbx, self._ubx)
+            if self.condensed:
+                self.rti = self._condensed_rti(p)
+            else:  # the shooting gaps are equalities and the states unbounded: qrqp
+                self.rti = rti_function(self.residual, self.constraints, self._lbg, self._ubg, self._lbx, self._ubx)
             if s.solver == "rti-c":
                 self.rti = compile_function(self.rti)
+
+    def _condensed_rti(self, p: ca.SX) -> ca.Function:
+        """The RTI step over the inputs only: the states come from a rollout from x0.
+
+        With no state constraints in this problem, eliminating the states leaves only the
+        input bounds and the rate bounds, which are linear in U. A shortened Gauss–Newton
+        step then stays feasible, so the step can backtrack on the cost (``step_lengths``).
+        The QP goes to the interior-point solver of :mod:`mpc.qp` (qrqp gets some of these
+        QPs wrong).
+        """
+        from mpc.rti import rti_function
+        m, s = self.model, self.settings
+        N, nx, nd = s.horizon, m.nx, m.nd
+        U = ca.SX.sym("U", N)
+        x0, d, u_prev = p[:nx], p[nx: nx + nd], p[nx + nd]
+        ref, u_ff = p[nx + nd + 1: nx + nd + 1 + N], p[nx + nd + 1 + N:]
+        x, states, residuals = x0, [x0], []
+        for k in range(N):
+            x = m.step(x, U[k], d)
+            states.append(x)
+            du = U[k] - (u_prev if k == 0 else U[k - 1])
+            residuals += [np.sqrt(s.q_output) * (m.output(x, d) - ref[k]), np.sqrt(s.r_rate) * du,
+                          np.sqrt(s.r_input) * (U[k] - u_ff[k])]
+        rates = U - ca.vertcat(u_prev, U[:-1])
+        self.rollout = ca.Function("nmpc_rollout", [U, p], [ca.horzcat(*states).T])
+        return rti_function(ca.Function("residual", [U, p], [ca.vertcat(*residuals)]),
+                            ca.Function("constraints", [U, p], [rates]),
+                            -self.du_max * np.ones(N), self.du_max * np.ones(N),
+                            self.u_min * np.ones(N), self.u_max * np.ones(N),
+                            step_lengths=(0.5, 0.25, 0.125), qp="ipm", qp_iterations=s.rti_qp_iterations)
 
     def solve(self, x0, d, u_prev: float, ref, u_guess, x_guess=None, u_ff=None) -> NmpcStep:
         """Solve the NLP from state ``x0`` for the references ``ref[0..N-1]`` = r_{k+1..k+N}.
@@ -192,27 +235,35 @@ class Nmpc:
         u_guess : array_like, shape (N,)
             Initial input guess.
         x_guess : array_like, shape (N+1, nx), optional
-            Initial state guess; default: roll the model out under ``u_guess``.
+            Initial state guess; default: roll the model out under ``u_guess``. Unused by
+            the condensed RTI step, which rolls out itself.
         u_ff : array_like, shape (N,), optional
             Feed-forward inputs that ``r_input`` pulls towards (default ``u_guess``).
         """
         N, nx = self.settings.horizon, self.model.nx
         u_guess = np.clip(np.asarray(u_guess, float).ravel(), self.u_min, self.u_max)
-        if x_guess is None:
-            x_guess = self.model.rollout(x0, u_guess, d)
         u_ff = u_guess if u_ff is None else np.asarray(u_ff, float).ravel()
         p = np.concatenate((np.asarray(x0, float).ravel(), np.asarray(d, float).ravel(), [u_prev],
                             np.asarray(ref, float).ravel(), u_ff))
-        w0 = np.concatenate((np.asarray(x_guess, float).ravel(), u_guess))
+        if self.condensed:
+            w0 = u_guess
+        else:
+            if x_guess is None:
+                x_guess = self.model.rollout(x0, u_guess, d)
+            w0 = np.concatenate((np.asarray(x_guess, float).ravel(), u_guess))
         if self._solver is None:  # RTI: rti_iterations Gauss–Newton steps from the warm start
+            from mpc.rti import QP_TOLERANCE, rti_steps
             start = time.perf_counter()
-            w = w0
-            for _ in range(self.settings.rti_iterations):
-                w = np.asarray(self.rti(w, p)).ravel()
+            w, qp_error = rti_steps(self.rti, w0, p, self.settings.rti_iterations)
             elapsed = time.perf_counter() - start
-            ok = bool(np.all(np.isfinite(w)))
+            finite = bool(np.all(np.isfinite(w)))
+            ok = finite and qp_error <= QP_TOLERANCE
+            if self.condensed:
+                x_plan = np.asarray(self.rollout(w, p)) if finite else np.full((N + 1, nx), np.nan)
+                w = np.concatenate((x_plan.ravel(), w))
+            status = "RTI_Step" if ok else ("RTI_Non_Finite" if not finite else "RTI_QP_Failed")
             return NmpcStep(u_plan=w[self._n_shoot:].reshape(N, 1), x_plan=w[: self._n_shoot].reshape(N + 1, nx),
-                            success=ok, status="RTI_Step" if ok else "RTI_Non_Finite",
+                            success=ok, status=status,
                             iterations=self.settings.rti_iterations,
                             solve_time=elapsed)
         args = {"x0": w0, "p": p, "lbx": self._lbx, "ubx": self._ubx, "lbg": self._lbg, "ubg": self._ubg}

@@ -23,8 +23,9 @@ REGULARISATION = 1e-8
 
 
 def rti_function(residual: ca.Function, constraints: ca.Function, lbg, ubg, lbx, ubx,
-                 name: str = "rti_step", step_lengths: tuple[float, ...] = ()) -> ca.Function:
-    """Build ``rti_step(w, p) -> w_next`` from the NLP's residual and constraint functions.
+                 name: str = "rti_step", step_lengths: tuple[float, ...] = (), qp: str = "qrqp",
+                 qp_iterations: int = 30) -> ca.Function:
+    """Build ``rti_step(w, p) -> (w_next, qp_error)`` from the NLP's residual and constraints.
 
     Parameters
     ----------
@@ -39,23 +40,46 @@ def rti_function(residual: ca.Function, constraints: ca.Function, lbg, ubg, lbx,
         (a fixed backtracking, code-generatable). Only sound where every constraint is
         convex in ``w``, so that a shortened QP step stays feasible: single shooting with
         linear constraints, not multiple shooting.
+    qp : {"qrqp", "ipm"}
+        ``qrqp``: CasADi's active-set solver (any bounds; wrong on some problems with
+        inequality rows, see :mod:`mpc.qp`). ``ipm``: :func:`mpc.qp.interior_point_qp`
+        with ``qp_iterations`` iterations (all bounds finite).
+
+    The second output, ``qp_error``, says how far the QP answer is from trustworthy: for
+    ``ipm`` its final residual, for ``qrqp`` the largest constraint violation of its answer,
+    each row's divided by the larger of its half width and 1. Callers count a step above
+    :data:`QP_TOLERANCE` as a failed solve.
     """
+    if qp not in ("qrqp", "ipm"):
+        raise ValueError(f"qp {qp!r} is unknown; allowed: qrqp, ipm")
+    lower = np.concatenate((np.ravel(lbx), np.ravel(lbg))).astype(float)
+    upper = np.concatenate((np.ravel(ubx), np.ravel(ubg))).astype(float)
     w_sx = ca.SX.sym("w", residual.size1_in(0))
     p_sx = ca.SX.sym("p", residual.size1_in(1))
+    n = w_sx.numel()
     r = residual(w_sx, p_sx)
     g = constraints(w_sx, p_sx)
     J = ca.jacobian(r, w_sx)
-    H = ca.mtimes(J.T, J) + REGULARISATION * ca.SX.eye(w_sx.numel())
+    H = ca.mtimes(J.T, J) + REGULARISATION * ca.SX.eye(n)
     A = ca.jacobian(g, w_sx)
     lin = ca.Function("rti_linearise", [w_sx, p_sx], [H, ca.mtimes(J.T, r), A, g])
-    qp = ca.conic(f"{name}_qp", "qrqp", {"h": H.sparsity(), "a": A.sparsity()},
-                  {"print_iter": False, "print_header": False, "error_on_fail": False})
-    w = ca.MX.sym("w", w_sx.numel())
+    w = ca.MX.sym("w", n)
     p = ca.MX.sym("p", p_sx.numel())
     H_mx, grad, A_mx, g_mx = lin(w, p)
-    sol = qp(h=H_mx, g=grad, a=A_mx, lba=ca.DM(lbg) - g_mx, uba=ca.DM(ubg) - g_mx,
-             lbx=ca.DM(lbx) - w, ubx=ca.DM(ubx) - w)
-    step = sol["x"]
+    C = ca.vertcat(ca.MX(ca.DM.eye(n)), A_mx)
+    l_mx = ca.DM(lower) - ca.vertcat(w, g_mx)
+    u_mx = ca.DM(upper) - ca.vertcat(w, g_mx)
+    if qp == "ipm":
+        if not (np.all(np.isfinite(lower)) and np.all(np.isfinite(upper)) and np.all(lower < upper)):
+            raise ValueError("qp 'ipm' needs finite bounds with lower < upper on every variable and constraint")
+        from mpc.qp import interior_point_qp
+        solver = interior_point_qp(H.sparsity(), C.sparsity(), qp_iterations)
+        step, qp_error, _ = solver(H_mx, grad, C, l_mx, u_mx)
+    else:
+        solver = ca.conic(f"{name}_qp", "qrqp", {"h": H.sparsity(), "a": A.sparsity()},
+                          {"print_iter": False, "print_header": False, "error_on_fail": False})
+        step = solver(h=H_mx, g=grad, a=A_mx, lba=l_mx[n:], uba=u_mx[n:], lbx=l_mx[:n], ubx=u_mx[:n])["x"]
+        qp_error = _constraint_violation(C @ step, l_mx, u_mx, lower, upper)
     w_next = w + step
     if step_lengths:
         cost = ca.Function("rti_cost", [w_sx, p_sx], [ca.sumsqr(r)])
@@ -66,7 +90,20 @@ def rti_function(residual: ca.Function, constraints: ca.Function, lbg, ubg, lbx,
             better = trial_cost < best_cost
             w_next = ca.if_else(better, trial, w_next)
             best_cost = ca.if_else(better, trial_cost, best_cost)
-    return ca.Function(name, [w, p], [w_next], ["w", "p"], ["w_next"])
+    return ca.Function(name, [w, p], [w_next, qp_error], ["w", "p"], ["w_next", "qp_error"])
+
+
+def _constraint_violation(Cx, l_mx, u_mx, lower, upper):
+    """Largest violation of ``l <= Cx <= u`` over the finite bounds, each row's divided by
+    the larger of its half width and 1."""
+    parts = [ca.MX(0)]
+    width = np.where(np.isfinite(upper - lower), np.maximum((upper - lower) / 2, 1.0), 1.0)
+    low, up = np.flatnonzero(np.isfinite(lower)), np.flatnonzero(np.isfinite(upper))
+    if len(low):
+        parts.append((l_mx[low.tolist()] - Cx[low.tolist()]) / ca.DM(width[low]))
+    if len(up):
+        parts.append((Cx[up.tolist()] - u_mx[up.tolist()]) / ca.DM(width[up]))
+    return ca.mmax(ca.vertcat(*parts))
 
 
 def cache_dir() -> Path:
@@ -111,6 +148,14 @@ def _accept_last_qp_iterate(source: str) -> str:
     return patched
 
 
-def least_squares_step(rti: ca.Function, w0, p) -> np.ndarray:
-    """One RTI step from ``w0``; NumPy in and out."""
-    return np.asarray(rti(w0, p)).ravel()
+QP_TOLERANCE = 1e-6
+"""A step whose ``qp_error`` exceeds this counts as a failed solve."""
+
+
+def rti_steps(rti: ca.Function, w0, p, iterations: int) -> tuple[np.ndarray, float]:
+    """``iterations`` RTI steps from ``w0``; returns the last iterate and the worst ``qp_error``."""
+    w, worst = np.asarray(w0, float), 0.0
+    for _ in range(iterations):
+        w_next, qp_error = rti(w, p)
+        w, worst = np.asarray(w_next).ravel(), max(worst, float(qp_error))
+    return w, worst

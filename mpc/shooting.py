@@ -148,15 +148,14 @@ class SingleShootingNmpc:
         u_ff = u_guess if u_ff is None else np.asarray(u_ff, float).ravel()
         p = np.concatenate((np.asarray(params, float).ravel(), [u_prev], np.asarray(ref, float).ravel(), u_ff))
         if self.rti is not None:  # RTI: one Gauss–Newton step from the (shifted) warm start
+            from mpc.rti import QP_TOLERANCE, rti_steps
             start = time.perf_counter()
-            u = u_guess
-            for _ in range(self.settings.rti_iterations):
-                u = np.asarray(self.rti(u, p)).ravel()
+            u, qp_error = rti_steps(self.rti, u_guess, p, self.settings.rti_iterations)
             elapsed = time.perf_counter() - start
-            success, status, iterations = bool(np.all(np.isfinite(u))), "RTI_Step", self.settings.rti_iterations
-            if not success:
-                status = "RTI_Non_Finite"
-            y = np.asarray(self.predict(params, u)).ravel() if success else np.full(N, np.nan)
+            finite = bool(np.all(np.isfinite(u)))
+            success, iterations = finite and qp_error <= QP_TOLERANCE, self.settings.rti_iterations
+            status = "RTI_Step" if success else ("RTI_Non_Finite" if not finite else "RTI_QP_Failed")
+            y = np.asarray(self.predict(params, u)).ravel() if finite else np.full(N, np.nan)
             return NmpcStep(u_plan=u.reshape(N, 1), x_plan=y.reshape(N, 1), success=success, status=status,
                             iterations=iterations, solve_time=elapsed)
         if self.settings.solver == "gn":

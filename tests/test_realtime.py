@@ -74,5 +74,40 @@ def test_rti_step_lengths_take_the_best_of_the_shortened_steps():
     constraints = ca.Function("g", [w, p], [ca.SX(0, 1)])
     full = rti_function(residual, constraints, [], [], [-10.0], [10.0])
     searched = rti_function(residual, constraints, [], [], [-10.0], [10.0], step_lengths=(0.5, 0.25, 0.125))
-    assert float(full(0.1, 0)) == pytest.approx(10.0)  # the QP step, clipped at the bound
-    assert float(searched(0.1, 0)) == pytest.approx(0.1 + 0.125 * 9.9)  # lowest cost of 10, 5.05, 2.575, 1.3375
+    assert float(full(0.1, 0)[0]) == pytest.approx(10.0)  # the QP step, clipped at the bound
+    assert float(searched(0.1, 0)[0]) == pytest.approx(0.1 + 0.125 * 9.9)  # lowest cost of 10, 5.05, 2.575, 1.3375
+
+
+@pytest.mark.parametrize("condensed", [True, False])
+def test_repeated_rti_steps_reach_the_converged_solution_or_say_they_failed(condensed):
+    """Iterated, the condensed RTI step (inputs only, interior-point QP) solves the same
+    problem as IPOPT (a smooth two-state model with active rate bounds). The multiple-shooting
+    step's qrqp gets this QP wrong, and the step reports it instead of passing it on."""
+    import casadi as ca
+    import numpy as np
+
+    from mpc.model import PredictionModel
+    from mpc.nmpc import Nmpc, NmpcSettings
+    x, u, d = ca.SX.sym("x", 2), ca.SX.sym("u"), ca.SX.sym("d")
+    x_next = ca.vertcat(0.8 * x[0] + 0.2 * x[1], 0.7 * x[1] + 0.3 * ca.tanh(u))
+    model = PredictionModel(step=ca.Function("f", [x, u, d], [x_next]),
+                            output=ca.Function("y", [x, d], [x[0] + d]),
+                            measure=ca.Function("z", [x, d], [x[0] + d]), sample_period=0.01,
+                            state_names=("a", "b"))
+    common = {"horizon": 8, "q_output": 100.0, "r_rate": 0.1}
+    ipopt = Nmpc(model, NmpcSettings(solver="ipopt", tol=1e-12, max_iter=500, **common), -2.0, 2.0, 0.15)
+    rti = Nmpc(model, NmpcSettings(solver="rti", rti_condensed=condensed, rti_iterations=30, **common),
+               -2.0, 2.0, 0.15)
+    assert rti.condensed == condensed
+    x0, dist = np.array([0.1, -0.2]), np.array([0.05])
+    ref = 0.25 * np.sin(np.linspace(0.3, 2.0, 8))
+    reference = ipopt.solve(x0, dist, 0.0, ref, np.zeros(8))
+    assert reference.success
+    assert np.any(np.isclose(np.abs(np.diff(np.r_[0.0, reference.u_plan[:, 0]])), 0.15))  # a rate bound binds
+    result = rti.solve(x0, dist, 0.0, ref, np.zeros(8))
+    if not condensed:
+        assert not result.success and result.status == "RTI_QP_Failed"
+        return
+    assert result.success
+    assert np.max(np.abs(result.u_plan - reference.u_plan)) < 1e-6
+    assert np.max(np.abs(result.x_plan - reference.x_plan)) < 1e-6
