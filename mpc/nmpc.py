@@ -211,11 +211,12 @@ class Nmpc:
             du = U[k] - (u_prev if k == 0 else U[k - 1])
             residuals += [np.sqrt(s.q_output) * (m.output(x, d) - ref[k]), np.sqrt(s.r_rate) * du,
                           np.sqrt(s.r_input) * (U[k] - u_ff[k])]
-        rates = U - ca.vertcat(u_prev, U[:-1])
+        n_rates = N if np.isfinite(self.du_max) else 0  # no rate rows for an unbounded rate
+        rates = (U - ca.vertcat(u_prev, U[:-1]))[:n_rates]
         self.rollout = ca.Function("nmpc_rollout", [U, p], [ca.horzcat(*states).T])
         return rti_function(ca.Function("residual", [U, p], [ca.vertcat(*residuals)]),
                             ca.Function("constraints", [U, p], [rates]),
-                            -self.du_max * np.ones(N), self.du_max * np.ones(N),
+                            -self.du_max * np.ones(n_rates), self.du_max * np.ones(n_rates),
                             self.u_min * np.ones(N), self.u_max * np.ones(N),
                             step_lengths=(0.5, 0.25, 0.125), qp="ipm", qp_iterations=s.rti_qp_iterations)
 

@@ -111,3 +111,20 @@ def test_repeated_rti_steps_reach_the_converged_solution_or_say_they_failed(cond
     assert result.success
     assert np.max(np.abs(result.u_plan - reference.u_plan)) < 1e-6
     assert np.max(np.abs(result.x_plan - reference.x_plan)) < 1e-6
+
+
+def test_condensed_rti_step_without_a_rate_bound():
+    """An unbounded rate leaves only the input bounds in the interior-point QP."""
+    import casadi as ca
+    import numpy as np
+
+    from mpc.model import PredictionModel
+    from mpc.nmpc import Nmpc, NmpcSettings
+    x, u, d = ca.SX.sym("x"), ca.SX.sym("u"), ca.SX.sym("d")
+    model = PredictionModel(step=ca.Function("f", [x, u, d], [0.5 * x + 0.5 * u]),
+                            output=ca.Function("y", [x, d], [x]), measure=ca.Function("z", [x, d], [x]),
+                            sample_period=0.01, state_names=("x",))
+    rti = Nmpc(model, NmpcSettings(horizon=4, solver="rti", r_rate=0.0, rti_iterations=3), -1.0, 1.0, np.inf)
+    result = rti.solve(np.zeros(1), np.zeros(1), 0.0, np.full(4, 2.0), np.zeros(4))
+    assert result.success
+    assert result.u_plan.ravel() == pytest.approx(np.ones(4), abs=1e-6)  # the target is out of reach: u at its bound
