@@ -9,6 +9,7 @@ import casadi as ca
 import numpy as np
 
 from mpc.model import PredictionModel
+from mpc.rti import QP_TOLERANCE, rti_steps
 
 SOLVERS = ("ipopt", "sqp", "rti", "rti-c", "gn")
 """Solver variants: IPOPT (robust default); CasADi sqpmethod + qrqp; ``rti``, one Gauss–Newton
@@ -253,7 +254,6 @@ class Nmpc:
                 x_guess = self.model.rollout(x0, u_guess, d)
             w0 = np.concatenate((np.asarray(x_guess, float).ravel(), u_guess))
         if self._solver is None:  # RTI: rti_iterations Gauss–Newton steps from the warm start
-            from mpc.rti import QP_TOLERANCE, rti_steps
             start = time.perf_counter()
             w, qp_error = rti_steps(self.rti, w0, p, self.settings.rti_iterations)
             elapsed = time.perf_counter() - start

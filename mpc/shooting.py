@@ -15,6 +15,7 @@ import casadi as ca
 import numpy as np
 
 from mpc.nmpc import NmpcSettings, NmpcStep
+from mpc.rti import QP_TOLERANCE, rti_steps
 
 
 class SingleShootingNmpc:
@@ -148,7 +149,6 @@ class SingleShootingNmpc:
         u_ff = u_guess if u_ff is None else np.asarray(u_ff, float).ravel()
         p = np.concatenate((np.asarray(params, float).ravel(), [u_prev], np.asarray(ref, float).ravel(), u_ff))
         if self.rti is not None:  # RTI: one Gauss–Newton step from the (shifted) warm start
-            from mpc.rti import QP_TOLERANCE, rti_steps
             start = time.perf_counter()
             u, qp_error = rti_steps(self.rti, u_guess, p, self.settings.rti_iterations)
             elapsed = time.perf_counter() - start
