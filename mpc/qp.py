@@ -35,8 +35,9 @@ def interior_point_qp(h_sparsity: ca.Sparsity, c_sparsity: ca.Sparsity, iteratio
         (identity and rate rows) keeps ``Cᵀ Σ C`` cheap.
     iterations : int
         Predictor–corrector iterations; there is no early exit, so the cost per call is
-        fixed (real time) and the function is one expression graph. 30 solved 200 random
-        badly scaled problems to 1e-6 of the rate bound (``tests/test_qp.py``).
+        fixed (real time) and the function is one expression graph. With 30, 200 random
+        badly scaled problems came within 1.3e-6 of OSQP's solution, relative to the rate
+        bound (``tests/test_qp.py`` checks 100 of them to 1e-5).
 
     Returns
     -------
