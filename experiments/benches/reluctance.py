@@ -239,17 +239,34 @@ def _build(kind: str):
 
 
 def force_table(model: IdentifiedModel, gap: float) -> tuple[np.ndarray, np.ndarray]:
-    """(X, F) points of Lut⁻¹ at ``gap``: the identified table, interpolated between gaps."""
+    """(X, F) points of Lut⁻¹ at ``gap``, anchored at the origin.
+
+    The identified table between the neighbouring gaps (a gap's own table when it was
+    identified), with the points where the slope does not change dropped, and (0, 0)
+    put in front: no current, no force. Without that anchor the table's lowest point
+    (noise-level force) would be extended flat to zero current, where a model with no
+    slope gives a Gauss–Newton step nothing to follow.
+    """
     a, b, w = model._neighbours(gap)
-    x_pts = np.unique(np.concatenate((model.tables[a][1], model.tables[b][1])))
-    return x_pts, model.force_of_x(x_pts, gap)
+    if w in (0.0, 1.0):
+        x_pts = np.asarray(model.tables[b if w == 1.0 else a][1], float)
+    else:
+        x_pts = np.unique(np.concatenate((model.tables[a][1], model.tables[b][1])))
+    f_pts = model.force_of_x(x_pts, gap)
+    keep = np.concatenate(([True], (np.diff(x_pts) > 1e-6) & (np.diff(f_pts) > 0)))
+    x_pts, f_pts = x_pts[keep], f_pts[keep]
+    if x_pts[0] > 0 and f_pts[0] > 0:
+        x_pts, f_pts = np.concatenate(([0.0], x_pts)), np.concatenate(([0.0], f_pts))
+    slopes = np.diff(f_pts) / np.diff(x_pts)
+    bends = np.abs(np.diff(slopes)) > 1e-9 * np.abs(slopes).max()
+    keep = np.concatenate(([True], bends, [True]))
+    return x_pts[keep], f_pts[keep]
 
 
 def smooth_force_of_x(model: IdentifiedModel, gap: float, kink_eps: float = 1e-4):
-    """Lut⁻¹(X, g) as a polyline whose kinks are rounded over ``kink_eps`` (for CasADi)."""
+    """Lut⁻¹(X, g) as the polyline of :func:`force_table` with its kinks rounded over
+    ``kink_eps`` (for CasADi)."""
     xs, fs = force_table(model, gap)
-    keep = np.concatenate(([True], np.diff(xs) > 1e-6))
-    xs, fs = xs[keep], fs[keep]
     slopes = np.diff(fs) / np.diff(xs)
 
     def force(v):
