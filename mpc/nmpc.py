@@ -9,7 +9,7 @@ import casadi as ca
 import numpy as np
 
 from mpc.model import PredictionModel
-from mpc.rti import QP_TOLERANCE, rti_steps
+from mpc.rti import QP_TOLERANCE, feasible_guess, rti_steps
 
 SOLVERS = ("ipopt", "sqp", "rti", "rti-c", "gn")
 """Solver variants: IPOPT (robust default); CasADi sqpmethod + qrqp; ``rti``, one Gauss–Newton
@@ -247,8 +247,8 @@ class Nmpc:
         u_ff = u_guess if u_ff is None else np.asarray(u_ff, float).ravel()
         p = np.concatenate((np.asarray(x0, float).ravel(), np.asarray(d, float).ravel(), [u_prev],
                             np.asarray(ref, float).ravel(), u_ff))
-        if self.condensed:
-            w0 = u_guess
+        if self.condensed:  # backtracking keeps feasibility only from a feasible start
+            w0 = feasible_guess(u_guess, u_prev, self.u_min, self.u_max, self.du_max)
         else:
             if x_guess is None:
                 x_guess = self.model.rollout(x0, u_guess, d)

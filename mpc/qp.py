@@ -23,9 +23,18 @@ INITIAL_SLACK = 0.5
 MU_FLOOR = 1e-13
 """Smallest complementarity the centring aims at: below it, z/s overflows the Newton matrix
 and the dual residual deteriorates although x is exact."""
+MIN_ITERATIONS = 10
+"""Iterations always run: before them a small residual can hide a poor x on badly scaled
+problems."""
+EXIT_TOLERANCE = 2 * MU_FLOOR
+"""After :data:`MIN_ITERATIONS`, the remaining iterations are skipped once the residual is
+below this, i.e. once the complementarity has reached its floor. A residual of 1e-10 is not
+enough: with complementarity left, a constraint can sit 1e-4 of its width from where it
+belongs (seen on ``tests/test_qp.py``'s problems)."""
 
 
-def interior_point_qp(h_sparsity: ca.Sparsity, c_sparsity: ca.Sparsity, iterations: int = 30) -> ca.Function:
+def interior_point_qp(h_sparsity: ca.Sparsity, c_sparsity: ca.Sparsity, iterations: int = 30,
+                      early_exit: bool = True) -> ca.Function:
     """``qp(h, g, c, l, u) -> (x, residual, parts)`` for ``min ½ xᵀHx + gᵀx, l <= Cx <= u``.
 
     Parameters
@@ -34,10 +43,13 @@ def interior_point_qp(h_sparsity: ca.Sparsity, c_sparsity: ca.Sparsity, iteratio
         Patterns of H (n × n) and C (m × n); bounds on x are rows of C too. A sparse C
         (identity and rate rows) keeps ``Cᵀ Σ C`` cheap.
     iterations : int
-        Predictor–corrector iterations; there is no early exit, so the cost per call is
-        fixed (real time) and the function is one expression graph. With 30, 200 random
-        badly scaled problems came within 1.3e-6 of OSQP's solution, relative to the rate
-        bound (``tests/test_qp.py`` checks 100 of them to 1e-5).
+        Most predictor–corrector iterations, so the cost per call is bounded (real time).
+        With 30, 200 random badly scaled problems came within 1.3e-6 of OSQP's solution,
+        relative to the rate bound (``tests/test_qp.py`` checks 100 of them to 1e-5).
+    early_exit : bool
+        Skip the iterations after the first :data:`MIN_ITERATIONS` once the residual is
+        below :data:`EXIT_TOLERANCE` (a conditional in the generated C, so a converged
+        QP costs only what it needed); false: always ``iterations``.
 
     Returns
     -------
@@ -47,8 +59,9 @@ def interior_point_qp(h_sparsity: ca.Sparsity, c_sparsity: ca.Sparsity, iteratio
         a tolerance to count a failed solve; and those three ``parts``. All bounds must be
         finite with ``l < u``.
     """
-    if iterations < 10:
-        raise ValueError(f"iterations must be >= 10 (fewer leave the residual unreliable), got {iterations}")
+    if iterations < MIN_ITERATIONS:
+        raise ValueError(f"iterations must be >= {MIN_ITERATIONS} (fewer leave the residual unreliable), "
+                         f"got {iterations}")
     n, m = c_sparsity.size2(), c_sparsity.size1()
     H, g = ca.MX.sym("h", h_sparsity), ca.MX.sym("g", n)
     C, l, u = ca.MX.sym("c", c_sparsity), ca.MX.sym("l", m), ca.MX.sym("u", m)
@@ -62,17 +75,43 @@ def interior_point_qp(h_sparsity: ca.Sparsity, c_sparsity: ca.Sparsity, iteratio
     s_l = ca.fmax(-l_s, INITIAL_SLACK * 2)
     s_u = ca.fmax(u_s, INITIAL_SLACK * 2)
     z_l, z_u = ca.MX.ones(m), ca.MX.ones(m)
-    iterate = _iteration(H_s.sparsity(), C_s.sparsity())  # one function, called `iterations` times
-    for _ in range(iterations):
-        x, s_l, s_u, z_l, z_u = iterate(x, s_l, s_u, z_l, z_u, H_s, g_s, C_s, l_s, u_s)
-
-    Cx = C_s @ x
-    dual = ca.mmax(ca.fabs(H_s @ x + g_s - C_s.T @ (z_l - z_u))) / (1 + ca.mmax(ca.fabs(g_s)))
-    primal = ca.mmax(ca.vertcat(l_s - Cx, Cx - u_s, 0))
-    gap = (ca.dot(s_l, z_l) + ca.dot(s_u, z_u)) / (2 * m)
-    residual = ca.mmax(ca.vertcat(dual, primal, gap))
-    return ca.Function("interior_point_qp", [H, g, C, l, u], [x, residual, ca.vertcat(dual, primal, gap)],
+    iterate = _iteration(H_s.sparsity(), C_s.sparsity())  # one function, called up to `iterations` times
+    measure = _residual(H_s.sparsity(), C_s.sparsity())
+    data = (H_s, g_s, C_s, l_s, u_s)
+    state = (x, s_l, s_u, z_l, z_u)
+    unless_done = ca.Function.if_else("ipm_iteration_unless_done", _unchanged(iterate), iterate)
+    for k in range(iterations):
+        if early_exit and k >= MIN_ITERATIONS:  # a branch in C: converged QPs skip the work
+            state = unless_done(measure(*state, *data)[0] <= EXIT_TOLERANCE, *state, *data)
+        else:
+            state = iterate(*state, *data)
+    residual, parts = measure(*state, *data)
+    x = state[0]
+    return ca.Function("interior_point_qp", [H, g, C, l, u], [x, residual, parts],
                        ["h", "g", "c", "l", "u"], ["x", "residual", "parts"])
+
+
+def _residual(h_sparsity: ca.Sparsity, c_sparsity: ca.Sparsity) -> ca.Function:
+    """``(x, s_l, s_u, z_l, z_u, H, g, C, l, u) -> (residual, parts)`` on the normalised
+    problem: the largest of the scaled dual residual, primal infeasibility and mean
+    complementarity, and those three."""
+    n, m = c_sparsity.size2(), c_sparsity.size1()
+    x, s_l, s_u, z_l, z_u = (ca.SX.sym(name, size) for name, size in
+                             (("x", n), ("s_l", m), ("s_u", m), ("z_l", m), ("z_u", m)))
+    H, g, C = ca.SX.sym("h", h_sparsity), ca.SX.sym("g", n), ca.SX.sym("c", c_sparsity)
+    l, u = ca.SX.sym("l", m), ca.SX.sym("u", m)
+    Cx = C @ x
+    dual = ca.mmax(ca.fabs(H @ x + g - C.T @ (z_l - z_u))) / (1 + ca.mmax(ca.fabs(g)))
+    primal = ca.mmax(ca.vertcat(l - Cx, Cx - u, 0))
+    gap = (ca.dot(s_l, z_l) + ca.dot(s_u, z_u)) / (2 * m)
+    return ca.Function("ipm_residual", [x, s_l, s_u, z_l, z_u, H, g, C, l, u],
+                       [ca.mmax(ca.vertcat(dual, primal, gap)), ca.vertcat(dual, primal, gap)])
+
+
+def _unchanged(iterate: ca.Function) -> ca.Function:
+    """``iterate``'s signature, returning the iterate it is given."""
+    args = [ca.SX.sym(iterate.name_in(i), iterate.sparsity_in(i)) for i in range(iterate.n_in())]
+    return ca.Function("ipm_done", args, args[:iterate.n_out()])
 
 
 def _step_to_boundary(v, dv):

@@ -152,6 +152,22 @@ QP_TOLERANCE = 1e-6
 """A step whose ``qp_error`` exceeds this counts as a failed solve."""
 
 
+def feasible_guess(u_guess, u_prev: float, u_min: float, u_max: float, du_max: float) -> np.ndarray:
+    """The guess moved into ``u_min <= u <= u_max``, ``|u_k − u_{k−1}| <= du_max`` by clipping
+    each input in turn to what its predecessor allows.
+
+    The backtracking RTI step takes fractions of the QP step; they stay feasible only when
+    the step starts from a feasible point (a convex combination of two feasible points).
+    An inverse-model guess after a reference jump is often not rate-feasible.
+    """
+    u = np.clip(np.asarray(u_guess, float).ravel(), u_min, u_max)
+    if np.isfinite(du_max):
+        last = float(np.clip(u_prev, u_min, u_max))
+        for k in range(len(u)):
+            u[k] = last = min(max(u[k], last - du_max, u_min), last + du_max, u_max)
+    return u
+
+
 def rti_steps(rti: ca.Function, w0, p, iterations: int) -> tuple[np.ndarray, float]:
     """``iterations`` RTI steps from ``w0``; returns the last iterate and the worst ``qp_error``."""
     w, worst = np.asarray(w0, float), 0.0

@@ -15,7 +15,7 @@ import casadi as ca
 import numpy as np
 
 from mpc.nmpc import NmpcSettings, NmpcStep
-from mpc.rti import QP_TOLERANCE, rti_steps
+from mpc.rti import QP_TOLERANCE, feasible_guess, rti_steps
 
 
 class SingleShootingNmpc:
@@ -149,8 +149,10 @@ class SingleShootingNmpc:
         u_ff = u_guess if u_ff is None else np.asarray(u_ff, float).ravel()
         p = np.concatenate((np.asarray(params, float).ravel(), [u_prev], np.asarray(ref, float).ravel(), u_ff))
         if self.rti is not None:  # RTI: one Gauss–Newton step from the (shifted) warm start
+            # backtracking keeps feasibility only from a feasible start
+            u_start = feasible_guess(u_guess, u_prev, self.u_min, self.u_max, self.du_max)
             start = time.perf_counter()
-            u, qp_error = rti_steps(self.rti, u_guess, p, self.settings.rti_iterations)
+            u, qp_error = rti_steps(self.rti, u_start, p, self.settings.rti_iterations)
             elapsed = time.perf_counter() - start
             finite = bool(np.all(np.isfinite(u)))
             success, iterations = finite and qp_error <= QP_TOLERANCE, self.settings.rti_iterations

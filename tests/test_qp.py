@@ -60,6 +60,18 @@ def test_a_small_residual_means_a_near_optimal_cost_even_with_few_iterations():
     assert flagged > 0  # 10 iterations are too few for some of these problems, and it shows
 
 
+def test_early_exit_gives_the_fixed_iteration_answer():
+    """Skipping the iterations after convergence must not move the answer."""
+    early = interior_point_qp(ca.Sparsity.dense(N, N), C_SPARSITY)
+    fixed = interior_point_qp(ca.Sparsity.dense(N, N), C_SPARSITY, early_exit=False)
+    rng = np.random.default_rng(1)
+    for _ in range(100):
+        H, g, l, u, du = _random_problem(rng)
+        x_early, residual, _ = early(H, g, C, l, u)
+        assert float(residual) <= 1e-6
+        assert np.max(np.abs(np.asarray(x_early) - np.asarray(fixed(H, g, C, l, u)[0]))) <= 1e-7 * du
+
+
 def test_compiled_interior_point_qp_equals_the_in_process_one(tmp_path):
     qp = interior_point_qp(ca.Sparsity.dense(N, N), C_SPARSITY)
     compiled = compile_function(qp, tmp_path)

@@ -128,3 +128,25 @@ def test_condensed_rti_step_without_a_rate_bound():
     result = rti.solve(np.zeros(1), np.zeros(1), 0.0, np.full(4, 2.0), np.zeros(4))
     assert result.success
     assert result.u_plan.ravel() == pytest.approx(np.ones(4), abs=1e-6)  # the target is out of reach: u at its bound
+
+
+def test_condensed_rti_plan_keeps_the_rate_bound_from_an_infeasible_guess():
+    """A guess that jumps (an inverse model after a reference step) is made rate-feasible
+    before the step, so the backtracking's shortened steps keep the rate bound too."""
+    import casadi as ca
+    import numpy as np
+
+    from mpc.model import PredictionModel
+    from mpc.nmpc import Nmpc, NmpcSettings
+    x, u, d = ca.SX.sym("x"), ca.SX.sym("u"), ca.SX.sym("d")
+    model = PredictionModel(step=ca.Function("f", [x, u, d], [0.6 * x + 0.4 * ca.sinh(2 * u)]),
+                            output=ca.Function("y", [x, d], [x]), measure=ca.Function("z", [x, d], [x]),
+                            sample_period=0.01, state_names=("x",))
+    rti = Nmpc(model, NmpcSettings(horizon=6, solver="rti", r_rate=0.01), -2.0, 2.0, 0.1)
+    rng = np.random.default_rng(4)
+    for _ in range(40):
+        guess = rng.uniform(-2.0, 2.0, 6)
+        result = rti.solve(rng.normal(size=1), np.zeros(1), 0.0, rng.uniform(-3, 3, 6), guess)
+        rates = np.diff(np.r_[0.0, result.u_plan[:, 0]])
+        assert result.success
+        assert np.max(np.abs(rates)) <= 0.1 + 1e-7
