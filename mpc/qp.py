@@ -91,15 +91,20 @@ def interior_point_qp(h_sparsity: ca.Sparsity, c_sparsity: ca.Sparsity, iteratio
                        ["h", "g", "c", "l", "u"], ["x", "residual", "parts"])
 
 
+def _symbols(h_sparsity: ca.Sparsity, c_sparsity: ca.Sparsity) -> tuple[ca.SX, ...]:
+    """SX symbols of an iterate ``(x, s_l, s_u, z_l, z_u)`` and of the data ``(H, g, C, l, u)``."""
+    n, m = c_sparsity.size2(), c_sparsity.size1()
+    return (ca.SX.sym("x", n), ca.SX.sym("s_l", m), ca.SX.sym("s_u", m), ca.SX.sym("z_l", m),
+            ca.SX.sym("z_u", m), ca.SX.sym("h", h_sparsity), ca.SX.sym("g", n),
+            ca.SX.sym("c", c_sparsity), ca.SX.sym("l", m), ca.SX.sym("u", m))
+
+
 def _residual(h_sparsity: ca.Sparsity, c_sparsity: ca.Sparsity) -> ca.Function:
     """``(x, s_l, s_u, z_l, z_u, H, g, C, l, u) -> (residual, parts)`` on the normalised
     problem: the largest of the scaled dual residual, primal infeasibility and mean
     complementarity, and those three."""
-    n, m = c_sparsity.size2(), c_sparsity.size1()
-    x, s_l, s_u, z_l, z_u = (ca.SX.sym(name, size) for name, size in
-                             (("x", n), ("s_l", m), ("s_u", m), ("z_l", m), ("z_u", m)))
-    H, g, C = ca.SX.sym("h", h_sparsity), ca.SX.sym("g", n), ca.SX.sym("c", c_sparsity)
-    l, u = ca.SX.sym("l", m), ca.SX.sym("u", m)
+    m = c_sparsity.size1()
+    x, s_l, s_u, z_l, z_u, H, g, C, l, u = _symbols(h_sparsity, c_sparsity)
     Cx = C @ x
     dual = ca.mmax(ca.fabs(H @ x + g - C.T @ (z_l - z_u))) / (1 + ca.mmax(ca.fabs(g)))
     primal = ca.mmax(ca.vertcat(l - Cx, Cx - u, 0))
@@ -163,11 +168,8 @@ def _newton_matrix(H: ca.SX, C: ca.SX, weights: ca.SX) -> list[list[ca.SX]]:
 def _iteration(h_sparsity: ca.Sparsity, c_sparsity: ca.Sparsity) -> ca.Function:
     """One Mehrotra predictor–corrector iteration on the normalised problem (SX; the
     predictor and the corrector share one factorisation of the Newton matrix)."""
-    n, m = c_sparsity.size2(), c_sparsity.size1()
-    x, s_l, s_u, z_l, z_u = (ca.SX.sym(name, size) for name, size in
-                             (("x", n), ("s_l", m), ("s_u", m), ("z_l", m), ("z_u", m)))
-    H, g, C = ca.SX.sym("h", h_sparsity), ca.SX.sym("g", n), ca.SX.sym("c", c_sparsity)
-    l, u = ca.SX.sym("l", m), ca.SX.sym("u", m)
+    m = c_sparsity.size1()
+    x, s_l, s_u, z_l, z_u, H, g, C, l, u = _symbols(h_sparsity, c_sparsity)
     Cx = C @ x
     r_d = H @ x + g - C.T @ (z_l - z_u)
     r_l = Cx - s_l - l
