@@ -1,5 +1,5 @@
 """``python -m experiments`` is ``hystmpc``."""
 
-from experiments.cli import entry_point
+from hystmpc.experiments.cli import entry_point
 
 entry_point()

@@ -53,7 +53,7 @@ def smoothing_error(model, inputs, eps: float, window: int, **smooth_options) ->
 def creep_window_error(model, inputs, windows) -> dict[str, dict[str, float]]:
     """Creep output of an FCKP model with memory window L against the full memory.
 
-    ``model`` is a :class:`models.fckp.Fckp`; the same input sequence drives the full-memory
+    ``model`` is a :class:`hystmpc.models.fckp.Fckp`; the same input sequence drives the full-memory
     creep (the plant's) and each truncated one (L past samples, the short-memory principle).
     Returns, per window (``"full"`` for None), the max and RMS difference in W and the
     relative RMS difference (against the RMS of W).
@@ -62,7 +62,7 @@ def creep_window_error(model, inputs, windows) -> dict[str, dict[str, float]]:
     state = model.initial_state()
     w = np.empty(len(inputs))
     for k, u in enumerate(inputs):
-        state, w[k] = model.kp_step(state, u)
+        state, w[k] = model.step(state, u)
     full_memory = model.creep(None)
     full = np.array([full_memory.push(v) for v in w])
     out = {}

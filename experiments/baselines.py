@@ -1,10 +1,23 @@
-"""Building blocks of the papers' baseline controllers."""
+"""Baseline controllers any actuator can have: PID, with hysteresis compensation or an inverse
+feed-forward in front of it.
+
+* :class:`PidController`: PID on the tracking error, optionally plus a feed-forward term;
+* :class:`InverseFeedforward`: the inverse hysteresis model turns the reference into an
+  input (the classic inverse-model compensation; zhou2024 Fig. 14);
+* :class:`HysteresisCompensation`: the hysteresis model fed by the *measured* output,
+  added to the command (vo2012 Fig. 1).
+
+:func:`inverse_feedforward_pid` puts the first two together for any model that has an inverse.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
+from hystmpc.models.base import HysteresisModel
 
 
 @dataclass(frozen=True)
@@ -59,6 +72,119 @@ class Pid:
             self._integral = integral
         return float(np.clip(feedforward + g.kp * error + self._integral + g.kd * self._derivative,
                              self.lo, self.hi))
+
+
+class Feedforward(Protocol):
+    """A feed-forward term: ``reset()``, then one value per sample."""
+
+    def reset(self) -> None: ...
+
+    def __call__(self, measurement, ref_window) -> float: ...
+
+
+class PidController:
+    """PID on ``reference − measured output``, plus an optional feed-forward term.
+
+    Parameters
+    ----------
+    gains : PidGains
+        The gains.
+    sample_period : float
+        Sample period (s).
+    limits : tuple of float
+        The input's bounds; the output is clipped there (with anti-windup).
+    feedforward : Feedforward, optional
+        Added to the PID output before the clip.
+    """
+
+    horizon = 0
+
+    def __init__(self, gains: PidGains, sample_period: float, limits: tuple[float, float],
+                 feedforward: Feedforward | None = None):
+        self.pid = Pid(gains, sample_period, limits)
+        self.feedforward = feedforward
+        self.reset()
+
+    def reset(self) -> None:
+        """Clear the PID and the feed-forward's memory."""
+        self.pid.reset()
+        if self.feedforward is not None:
+            self.feedforward.reset()
+        self.predicted_output = float("nan")
+
+    def step(self, measurement, ref_window) -> float:
+        """Input for this sample."""
+        ff = 0.0 if self.feedforward is None else self.feedforward(measurement, ref_window)
+        return self.pid.update(float(ref_window[0]) - measurement.y, ff)
+
+    def stats(self) -> None:
+        return None
+
+
+class InverseFeedforward:
+    """The input that the inverse hysteresis model gives for the reference.
+
+    ``h = steady_input(r)`` is the hysteresis output that holds the output at ``r`` at rest
+    (default: ``r`` itself), ``v = hysteresis.inverse_step(h)`` the hysteresis input and
+    ``u = input_of(v)`` the actuator input (default: ``v``). The inverse model's memory
+    follows its own inputs.
+
+    Parameters
+    ----------
+    hysteresis : HysteresisModel
+        The nominal hysteresis model.
+    steady_input, input_of : callable, optional
+        See above.
+    preview : int
+        Target the reference this many samples ahead (a known dead time).
+    """
+
+    def __init__(self, hysteresis: HysteresisModel, steady_input: Callable | None = None,
+                 input_of: Callable | None = None, preview: int = 0):
+        self.hysteresis, self.steady_input, self.input_of, self.preview = hysteresis, steady_input, input_of, preview
+        self.reset()
+
+    def reset(self) -> None:
+        """The inverse model at rest."""
+        self._state = self.hysteresis.initial_state()
+
+    def __call__(self, measurement, ref_window) -> float:
+        r = float(ref_window[min(self.preview, len(ref_window) - 1)])
+        target = r if self.steady_input is None else float(self.steady_input(r))
+        self._state, v = self.hysteresis.inverse_step(self._state, target)
+        return float(v if self.input_of is None else self.input_of(v))
+
+
+class HysteresisCompensation:
+    """The hysteresis model's output along the *measured* output, added to the command (vo2012 Fig. 1)."""
+
+    def __init__(self, hysteresis: HysteresisModel):
+        self.hysteresis = hysteresis
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the model's memory (it starts at the first measurement)."""
+        self._state = None
+
+    def __call__(self, measurement, ref_window) -> float:
+        if self._state is None:
+            self._state = self.hysteresis.initial_state(measurement.y)
+        self._state, value = self.hysteresis.step(self._state, measurement.y)
+        return float(value)
+
+
+def inverse_feedforward_pid(hysteresis: HysteresisModel, gains: PidGains, sample_period: float,
+                            limits: tuple[float, float], steady_input: Callable | None = None,
+                            input_of: Callable | None = None, preview: int = 0) -> PidController:
+    """Inverse feed-forward + PID (the usual scheme for an actuator with hysteresis).
+
+    See :class:`InverseFeedforward` for ``steady_input``, ``input_of`` and ``preview``; the
+    controller asks for ``preview`` samples of reference preview.
+    """
+    controller = PidController(gains, sample_period, limits,
+                               InverseFeedforward(hysteresis, steady_input, input_of, preview))
+    controller.horizon = preview
+    return controller
 
 
 class Replay:

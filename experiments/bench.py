@@ -1,50 +1,33 @@
-"""What a bench is: plant, nominal model, scenarios, controllers and the paper's figures."""
+"""What a bench is: plant, nominal model, scenarios, controllers and the paper's figures.
+
+A bench file only wires these together; the physics and each actuator's prediction model
+live in ``plants/`` and ``models/``, the controllers in ``mpc/`` and
+:mod:`hystmpc.experiments.baselines`. Its parameters are configuration groups (frozen
+dataclasses, ``--set GROUP.KEY=VALUE``); every builder declares the groups it reads and
+gets only those, so a key a bench accepts is one something uses.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
-
-from plants.base import Measurement
-
-
-class Controller(Protocol):
-    """Shape shared by every controller: ``reset()``, then ``step(measurement, refs)``."""
-
-    horizon: int
-    """Future reference samples the controller wants beyond the current one (0: causal)."""
-
-    def reset(self) -> None: ...
-
-    def step(self, measurement: Measurement, ref_window: np.ndarray) -> float: ...
-
-    def stats(self) -> dict | None: ...
-
-
-@dataclass(frozen=True)
-class Scenario:
-    """A reference trajectory with a name and a duration."""
-
-    name: str
-    description: str
-    duration: float
-    """Length of the run (s)."""
-    reference: Callable[[np.ndarray], np.ndarray]
-    """Reference as a function of time (vectorised)."""
-    conditions: tuple[str, ...] = ()
-    """Operating conditions the scenario fixes, as ``--set`` assignments (``rig.gap_mm=1.2``)."""
+from hystmpc.experiments.config import apply_overrides
+from hystmpc.experiments.runner import Controller, Labels, RunResult, Scenario, simulate
 
 
 @dataclass(frozen=True)
 class ControllerSpec:
-    """A named controller: how to build it from the bench configuration."""
+    """A named controller: how to build it from the groups it reads."""
 
     name: str
     description: str
     build: Callable[[dict[str, Any]], Controller]
+    """Gets a configuration holding ``groups`` only."""
+    groups: tuple[str, ...]
+    """Configuration groups the controller reads."""
 
 
 @dataclass(frozen=True)
@@ -64,6 +47,8 @@ class Bench:
     defaults: Callable[[], dict[str, Any]]
     """Fresh parameter groups (``plant``, ``model``, controller groups) for ``--set``."""
     make_plant: Callable[[dict[str, Any]], Any]
+    plant_groups: tuple[str, ...]
+    """Configuration groups ``make_plant`` reads."""
     output_range: tuple[float, float]
     """References outside this range are rejected."""
     paper_figures: dict[tuple[str, str], dict[str, float]] = field(default_factory=dict)
@@ -73,37 +58,94 @@ class Bench:
     default_scenario: str = ""
     error_vs_reference: bool = False
     """Also plot the error against the reference (katalenic2013 Figs. 11–13 style)."""
-
-
-class NmpcAdapter:
-    """Runs a :class:`mpc.NmpcController` as a bench controller.
-
-    Parameters
-    ----------
-    controller : mpc.NmpcController
-        Estimator + NLP of the bench's nominal model.
-    sensors : callable
-        ``Measurement -> z``: the sensor vector the model's ``measure`` function predicts.
-    """
-
-    def __init__(self, controller, sensors: Callable[[Measurement], np.ndarray]):
-        self.controller = controller
-        self.sensors = sensors
-        self.horizon = controller.horizon
+    fixed: dict[str, str] = field(default_factory=dict)
+    """Keys of the groups that cannot be set on this bench, with the reason."""
 
     @property
-    def predicted_output(self) -> float:
-        """The model's one-step-ahead prediction of this sample's output."""
-        return self.controller.predicted_output
+    def labels(self) -> Labels:
+        """Names and units of the bench's signals."""
+        return Labels(self.output_name, self.units, self.input_units, self.loop, f"{self.name}: {self.description}")
 
-    def reset(self) -> None:
-        """Forget the estimate, plan and counters."""
-        self.controller.reset()
+    def configure(self, assignments=()) -> dict[str, Any]:
+        """The default configuration with ``KEY=VALUE`` assignments applied (``ValueError``
+        naming a bad or fixed key)."""
+        return apply_overrides(self.defaults(), list(assignments), self.fixed)
 
-    def step(self, measurement: Measurement, ref_window) -> float:
-        """NMPC input for this sample."""
-        return self.controller.step(self.sensors(measurement), ref_window)
+    def _groups(self, config: dict[str, Any], groups: tuple[str, ...], who: str) -> dict[str, Any]:
+        missing = [g for g in groups if g not in config]
+        if missing:
+            raise ValueError(f"{who} reads configuration group(s) {missing} the configuration lacks")
+        return {g: config[g] for g in groups}
 
-    def stats(self) -> dict:
-        """Solver statistics."""
-        return self.controller.stats()
+    def build_plant(self, config: dict[str, Any]):
+        """The simulated plant of ``config``."""
+        return self.make_plant(self._groups(config, self.plant_groups, "the plant"))
+
+    def build_controller(self, name: str, config: dict[str, Any]) -> Controller:
+        """Controller ``name`` built from ``config``."""
+        if name not in self.controllers:
+            raise ValueError(f"unknown controller {name!r}; allowed: {', '.join(self.controllers)}")
+        spec = self.controllers[name]
+        return spec.build(self._groups(config, spec.groups, f"controller {name!r}"))
+
+    def scenario(self, name: str) -> Scenario:
+        """Scenario ``name``."""
+        if name not in self.scenarios:
+            raise ValueError(f"unknown scenario {name!r}; allowed: {', '.join(self.scenarios)}")
+        return self.scenarios[name]
+
+    def prepare(self, scenario: Scenario | str, controller: str, config: dict[str, Any] | None = None) -> Prepared:
+        """The plant and controller for a run, with the scenario's conditions applied.
+
+        Raises ``ValueError`` for settings the plant or controller cannot take, before
+        anything runs.
+        """
+        scenario = self.scenario(scenario) if isinstance(scenario, str) else scenario
+        config = self.configure() if config is None else config
+        if scenario.conditions:
+            config = apply_overrides(config, list(scenario.conditions))
+        return Prepared(scenario, controller, config, self.build_plant(config),
+                        self.build_controller(controller, config))
+
+    def run(self, scenario: Scenario | str, controller: str, config: dict[str, Any] | None = None, seed: int = 0,
+            duration: float | None = None, progress=None, prepared: Prepared | None = None) -> RunResult:
+        """Run ``controller`` on ``scenario`` against the bench's plant.
+
+        Parameters
+        ----------
+        scenario : Scenario or str
+            A scenario (or its name); its conditions are applied to ``config``.
+        controller : str
+            One of ``controllers``.
+        config : dict, optional
+            Parameter groups (default: :meth:`configure` with no changes).
+        seed : int
+            Seed of the plant's sensor noise.
+        duration : float, optional
+            Override of the scenario's duration (s).
+        progress : callable, optional
+            Called with the number of samples done after each sample.
+        prepared : Prepared, optional
+            What :meth:`prepare` gave for the same arguments (code-generation checks wrap
+            its controller's solver first).
+        """
+        prepared = self.prepare(scenario, controller, config) if prepared is None else prepared
+        from hystmpc.experiments.config import describe
+        run = simulate(prepared.plant, prepared.controller, prepared.scenario, duration, seed, name=controller,
+                       labels=self.labels, progress=progress)
+        run.parameters = describe(prepared.config)
+        run.paper = self.paper_figures.get((prepared.scenario.name, controller))
+        run.bench = self.name
+        return run
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """A run ready to start: :meth:`Bench.prepare`'s result."""
+
+    scenario: Scenario
+    controller_name: str
+    config: dict[str, Any]
+    """The configuration with the scenario's conditions applied."""
+    plant: Any
+    controller: Controller

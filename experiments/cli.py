@@ -13,13 +13,12 @@ import os
 import sys
 from pathlib import Path
 
-from experiments.bench import Bench
-from experiments.benches import BENCH_NAMES, DEFAULT_BENCH, get_bench
-from experiments.config import apply_overrides
-from experiments.reference import load_reference
-from experiments.report import comparison_table, results_document, write_json, write_run_csv
-from experiments.runner import RunResult, simulate
-from mpc.nmpc import SOLVERS
+from hystmpc.experiments.bench import Bench
+from hystmpc.experiments.benches import BENCH_NAMES, DEFAULT_BENCH, get_bench
+from hystmpc.experiments.reference import load_reference
+from hystmpc.experiments.report import comparison_table, results_document, write_json, write_run_csv
+from hystmpc.experiments.runner import RunResult
+from hystmpc.mpc.settings import SOLVERS
 
 
 class UsageError(Exception):
@@ -109,8 +108,8 @@ def _identify(args) -> int:
                          f"{', '.join(IDENTIFIABLE)}")
     bench = _bench(args.bench)
     config = _config(bench, args.overrides)
-    from experiments.benches.reluctance import identified_document
-    from experiments.report import version
+    from hystmpc.experiments.benches.reluctance import identified_document
+    from hystmpc.experiments.report import version
     doc = identified_document(config)
     doc["version"] = version()
     doc["overrides"] = list(args.overrides)
@@ -132,7 +131,7 @@ def _positive_duration(value) -> None:
 
 
 def _codegen(args) -> int:
-    from experiments.realtime import codegen
+    from hystmpc.experiments.realtime import codegen
     bench = _bench(args.bench)
     if args.solver not in CODEGEN_SOLVERS:
         raise UsageError(f"--solver {args.solver!r} cannot be code-generated yet; "
@@ -158,8 +157,8 @@ def _codegen(args) -> int:
 
 
 def _speed(args) -> int:
-    from experiments.realtime import speed, speed_table
-    from experiments.report import version
+    from hystmpc.experiments.realtime import speed, speed_table
+    from hystmpc.experiments.report import version
     bench = _bench(args.bench)
     _positive_duration(args.duration)
     config = _config(bench, args.overrides)
@@ -190,7 +189,7 @@ EXECUTORS = ("local", "dask")
 
 
 def _sweep(args) -> int:
-    from experiments.sweep import SpecError, load_spec, run_sweep, summary_table
+    from hystmpc.experiments.sweep import SpecError, load_spec, run_sweep, summary_table
     _positive_duration(args.duration)
     if args.executor not in EXECUTORS:
         raise UsageError(f"unknown executor {args.executor!r}; allowed: {', '.join(EXECUTORS)}")
@@ -233,7 +232,7 @@ def _check_names(kind: str, names: list[str], allowed) -> None:
 
 def _config(bench: Bench, overrides: list[str]):
     try:
-        return apply_overrides(bench.defaults(), overrides)
+        return bench.configure(overrides)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
 
@@ -271,26 +270,30 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
         for scenario in scenarios:
             for controller in controllers:
                 bar.set_description(f"{scenario.name} · {controller}")
-                run = simulate(bench, scenario, controller, config, seed=args.seed,
-                               duration=args.duration, progress=bar.update)
+                try:
+                    prepared = bench.prepare(scenario, controller, config)
+                except ValueError as exc:  # a setting the controller or plant cannot take
+                    raise UsageError(str(exc)) from None
+                run = bench.run(scenario, controller, seed=args.seed, duration=args.duration, progress=bar.update,
+                                prepared=prepared)
                 runs.append(run)
                 write_run_csv(run, out)
-    doc = results_document(bench, runs, command=sys.argv[1:] if sys.argv else None)
+    doc = results_document(bench.name, runs, command=sys.argv[1:] if sys.argv else None)
     write_json(doc, out / "results.json")
     if args.json_file:
         write_json(doc, args.json_file)
-    table = comparison_table(bench, runs)
+    table = comparison_table(runs)
     (out / "table.md").write_text(table + "\n")
     figures = []
     if not args.no_plots:
-        from experiments.plots import error_vs_reference_figure, rmse_figure, scenario_figure
+        from hystmpc.experiments.plots import error_vs_reference_figure, rmse_figure, scenario_figure
         for scenario in scenarios:
             subset = [r for r in runs if r.scenario == scenario.name]
-            figures.append(scenario_figure(bench, subset, out / f"{scenario.name}.png"))
+            figures.append(scenario_figure(subset, out / f"{scenario.name}.png"))
             if bench.error_vs_reference:
-                figures.append(error_vs_reference_figure(bench, subset, out / f"{scenario.name}_error.png"))
+                figures.append(error_vs_reference_figure(subset, out / f"{scenario.name}_error.png"))
         if len(runs) > 1:
-            figures.append(rmse_figure(bench, runs, out / "rmse.png"))
+            figures.append(rmse_figure(runs, out / "rmse.png"))
     if not args.quiet:
         print(table)
         print(f"\nresults: {out / 'results.json'}" + (f" and {args.json_file}" if args.json_file else ""))

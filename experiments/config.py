@@ -1,26 +1,64 @@
-"""``--set KEY=VALUE`` overrides of a bench's parameter groups, with clear errors."""
+"""``--set KEY=VALUE`` overrides of a bench's parameter groups, with clear errors.
+
+A configuration is a dict of groups, each a frozen dataclass; a key is ``group.field``,
+``group.field.sub`` for a nested dataclass (any depth), or ``group.field.NAME`` for a field
+that maps option names to values (solver pass-through options).
+"""
 
 from __future__ import annotations
 
 import dataclasses
+import difflib
 from typing import Any
+
+MOVED = {
+    "nmpc.eps": "smoothing.eps", "nmpc.direction_eps": "smoothing.direction_eps",
+    "nmpc.max_iter": "solver.<solver>.max_iter", "nmpc.tol": "solver.<solver>.tol",
+    "nmpc.warm_multipliers": "solver.ipopt.warm_multipliers (or solver.sqp.warm_multipliers)",
+    "nmpc.rti_iterations": "solver.rti.iterations", "nmpc.rti_condensed": "solver.rti.condensed",
+    "nmpc.rti_qp_iterations": "solver.rti.qp_iterations",
+}
+"""Keys that moved to their own groups, and where to."""
+OPTION = "<name>"
+"""Stands for any option name in :func:`allowed_keys`."""
 
 
 def _fields(obj) -> dict[str, dataclasses.Field]:
     return {f.name: f for f in dataclasses.fields(obj)}
 
 
+def _keys(prefix: str, obj) -> list[str]:
+    keys = []
+    for name in _fields(obj):
+        value = getattr(obj, name)
+        if dataclasses.is_dataclass(value):
+            keys += _keys(f"{prefix}.{name}", value)
+        elif isinstance(value, dict):
+            keys.append(f"{prefix}.{name}.{OPTION}")
+        else:
+            keys.append(f"{prefix}.{name}")
+    return keys
+
+
 def allowed_keys(config: dict[str, Any]) -> list[str]:
-    """Every settable ``group.field`` (and ``group.field.sub`` for nested dataclasses)."""
+    """Every settable key (``group.field``, ``group.field.sub``..., ``group.options.<name>``)."""
     keys = []
     for group, obj in config.items():
-        for name in _fields(obj):
-            value = getattr(obj, name)
-            if dataclasses.is_dataclass(value):
-                keys += [f"{group}.{name}.{sub}" for sub in _fields(value)]
-            else:
-                keys.append(f"{group}.{name}")
+        keys += _keys(group, obj)
     return keys
+
+
+def _number(text: str) -> Any:
+    """An option value: a bool, an int, a float or the text itself."""
+    lowered = text.strip().lower()
+    if lowered in ("true", "false"):
+        return lowered == "true"
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text.strip()
 
 
 def _parse(text: str, current: Any, key: str) -> Any:
@@ -41,11 +79,18 @@ def _parse(text: str, current: Any, key: str) -> Any:
             return value
         if isinstance(current, tuple):
             values = tuple(float(v) for v in text.split(","))
+            if current and isinstance(current[0], tuple):  # points: a flat list, regrouped
+                width = len(current[0])
+                if len(values) % width or not values:
+                    raise ValueError
+                return tuple(values[i: i + width] for i in range(0, len(values), width))
             if len(values) != len(current):
                 raise ValueError
             return values
     except ValueError:
-        if isinstance(current, tuple):
+        if isinstance(current, tuple) and current and isinstance(current[0], tuple):
+            kind = f"comma-separated numbers, {len(current[0])} per point"
+        elif isinstance(current, tuple):
             kind = f"{len(current)} comma-separated numbers"
         else:
             kind = "an integer" if isinstance(current, int) else "a finite number"
@@ -53,11 +98,48 @@ def _parse(text: str, current: Any, key: str) -> Any:
     return text
 
 
-def apply_overrides(config: dict[str, Any], assignments: list[str]) -> dict[str, Any]:
+def _unknown(key: str, config: dict[str, Any]) -> ValueError:
+    if key in MOVED:
+        return ValueError(f"--set {key} is now {MOVED[key]}")
+    group = key.split(".", 1)[0]
+    if group not in config:
+        return ValueError(f"unknown --set group {group!r} in {key!r}; allowed groups: {', '.join(config)}")
+    fields = [k.split(".", 1)[1] for k in _keys(group, config[group])]
+    near = difflib.get_close_matches(key.split(".", 1)[-1], fields, n=1, cutoff=0.6)
+    hint = f"did you mean '{group}.{near[0]}'? " if near else ""
+    return ValueError(f"unknown --set key {key!r}; {hint}keys of group {group}: {', '.join(fields)}")
+
+
+def _replace(obj, path: list[str], text: str, key: str):
+    """``obj`` with the field at ``path`` set from ``text`` (dataclasses rebuilt and re-validated)."""
+    name, rest = path[0], path[1:]
+    value = getattr(obj, name)
+    if isinstance(value, dict):
+        new = {**value, ".".join(rest): _number(text)}
+    elif rest:
+        new = _replace(value, rest, text, key)
+    else:
+        new = _parse(text, value, key)
+    try:
+        return dataclasses.replace(obj, **{name: new})
+    except ValueError as exc:
+        raise ValueError(f"--set {key}={text}: {exc}") from None
+
+
+def _match(key: str, allowed: list[str]) -> bool:
+    if key in allowed:
+        return True
+    return any(a.endswith(OPTION) and key.startswith(a[: -len(OPTION)]) and len(key) > len(a) - len(OPTION)
+               for a in allowed)
+
+
+def apply_overrides(config: dict[str, Any], assignments: list[str], fixed: dict[str, str] | None = None
+                    ) -> dict[str, Any]:
     """Return a new configuration with each ``KEY=VALUE`` applied.
 
-    Raises ``ValueError`` naming the bad key (and the allowed ones) or the bad value; the
-    dataclasses' own validation then checks ranges.
+    Raises ``ValueError`` naming the bad key (with the nearest allowed one), a key in
+    ``fixed`` (with its reason) or the bad value; the dataclasses' own validation then
+    checks ranges.
     """
     config = dict(config)
     allowed = allowed_keys(config)
@@ -66,17 +148,12 @@ def apply_overrides(config: dict[str, Any], assignments: list[str]) -> dict[str,
             raise ValueError(f"--set {assignment!r}: expected KEY=VALUE")
         key, text = assignment.split("=", 1)
         key = key.strip()
-        if key not in allowed:
-            raise ValueError(f"unknown --set key {key!r}; allowed: {', '.join(allowed)}")
+        if not _match(key, allowed):
+            raise _unknown(key, config)
+        if fixed and key in fixed:
+            raise ValueError(f"--set {key} cannot be changed on this bench: {fixed[key]}")
         group, *path = key.split(".")
-        obj = config[group]
-        if len(path) == 1:
-            new = _parse(text, getattr(obj, path[0]), key)
-            config[group] = dataclasses.replace(obj, **{path[0]: new})
-        else:
-            inner = getattr(obj, path[0])
-            new = _parse(text, getattr(inner, path[1]), key)
-            config[group] = dataclasses.replace(obj, **{path[0]: dataclasses.replace(inner, **{path[1]: new})})
+        config[group] = _replace(config[group], path, text, key)
     return config
 
 
@@ -86,9 +163,9 @@ def describe(config: dict[str, Any]) -> dict[str, Any]:
 
 
 def get_value(config: dict[str, Any], key: str) -> Any:
-    """The current value of a ``group.field`` (or ``group.field.sub``) key."""
+    """The current value of a key."""
     if key not in allowed_keys(config):
-        raise ValueError(f"unknown key {key!r}; allowed: {', '.join(allowed_keys(config))}")
+        raise _unknown(key, config)
     group, *path = key.split(".")
     value = config[group]
     for name in path:

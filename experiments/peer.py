@@ -16,13 +16,14 @@ from __future__ import annotations
 import contextlib
 import time
 import warnings
+from dataclasses import replace
 
 import casadi as ca
 import numpy as np
 
 
 def do_mpc_problem(nmpc, solver_options: dict | None = None):
-    """A do-mpc MPC with the problem of ``nmpc`` (a :class:`mpc.nmpc.Nmpc`)."""
+    """A do-mpc MPC with the problem of ``nmpc`` (a :class:`hystmpc.mpc.MultipleShootingProblem`)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         import do_mpc
@@ -80,11 +81,11 @@ def _quiet_peer():
 def first_inputs(nmpc, mpc, state, x0, d, u_prev: float, refs) -> tuple[float, float, float, float]:
     """First input of both for one problem instance, and each solve's wall time (s).
 
-    ``refs`` are r_{k+1..k+N} as :meth:`mpc.nmpc.Nmpc.solve` takes them.
+    ``refs`` are r_{k+1..k+N} as :meth:`hystmpc.mpc.MultipleShootingProblem.solve` takes them.
     """
     refs = np.asarray(refs, float)
     start = time.perf_counter()
-    ours = nmpc.solve(x0, d, u_prev, refs, np.full(len(refs), u_prev))
+    ours = nmpc.solve(np.concatenate((x0, d)), u_prev, refs, np.full(len(refs), u_prev))
     t_ours = time.perf_counter() - start
     # do-mpc's stage k costs x_k against its tvp ref_k: shift by one (the k = 0 term is constant)
     state["refs"] = np.concatenate(([refs[0]], refs))
@@ -100,84 +101,92 @@ def first_inputs(nmpc, mpc, state, x0, d, u_prev: float, refs) -> tuple[float, f
     return float(ours.u_plan[0, 0]), theirs, t_ours, t_theirs
 
 
+class _Recorder:
+    """Wraps a problem's ``solve``: keeps ``(x0, d, u_prev, refs)`` of every call."""
+
+    def __init__(self, problem):
+        self.problem, self.calls = problem, []
+        self._solve, problem.solve = problem.solve, self
+
+    def __call__(self, condition, u_prev, refs, *args, **kwargs):
+        nx = self.problem.model.nx
+        self.calls.append((condition[:nx].copy(), condition[nx:].copy(), float(u_prev), np.array(refs, float)))
+        return self._solve(condition, u_prev, refs, *args, **kwargs)
+
+
 def compare_with_do_mpc(bench_name: str = "pam", samples: int = 5, duration: float = 4.0) -> dict:
     """Solve a few closed-loop states of the bench's default scenario with both; time both.
 
     The states come from an IPOPT run of hystmpc's NMPC; both solvers then start from the
     same state, disturbance estimate, last input and reference window.
     """
-    from dataclasses import replace
-
-    from experiments.benches import get_bench
-    from experiments.runner import reference_samples
+    from hystmpc.experiments.benches import get_bench
     bench = get_bench(bench_name)
-    config = bench.defaults()
-    config = {**config, "nmpc": replace(config["nmpc"], solver="ipopt", tol=1e-10, max_iter=500)}
-    adapter = bench.controllers["nmpc"].build(config)
-    nmpc = adapter.controller.nmpc
-    scenario = bench.scenarios[bench.default_scenario]
-    t, ref = reference_samples(scenario, bench.sample_period, duration)
-    plant = bench.make_plant(config)
-    meas = plant.reset(0)
-    N = nmpc.settings.horizon
-    padded = np.concatenate((ref, np.full(N + 1, ref[-1])))
-    picks = set(np.linspace(len(t) // 4, len(t) - 1, samples).astype(int))
-    cases = []
-    for k in range(len(t)):
-        u_prev = float(adapter.controller._u_last)
-        u = adapter.step(meas, padded[k: k + N + 1])
-        if k in picks:
-            est = adapter.controller.estimator
-            cases.append((est.x.copy(), est.d.copy(), u_prev, padded[k + 1: k + N + 1].copy()))
-        meas = plant.step(u)
-    mpc, state = do_mpc_problem(nmpc, {"ipopt.tol": 1e-10})
+    config = bench.configure(["nmpc.solver=ipopt", "solver.ipopt.tol=1e-10", "solver.ipopt.max_iter=500"])
+    prepared = bench.prepare(bench.default_scenario, "nmpc", config)
+    problem = prepared.controller.problem
+    recorder = _Recorder(problem)
+    bench.run(bench.default_scenario, "nmpc", duration=duration, prepared=prepared)
+    problem.solve = recorder._solve
+    picks = np.linspace(len(recorder.calls) // 4, len(recorder.calls) - 1, samples).astype(int)
+    mpc, state = do_mpc_problem(problem, {"ipopt.tol": 1e-10})
     rows = []
-    for x0, d, u_prev, refs in cases:
-        ours, theirs, t_ours, t_theirs = first_inputs(nmpc, mpc, state, x0, d, u_prev, refs)
+    for k in sorted(set(picks)):
+        ours, theirs, t_ours, t_theirs = first_inputs(problem, mpc, state, *recorder.calls[k])
         rows.append({"hystmpc": ours, "do_mpc": theirs,
                      "relative_difference": abs(ours - theirs) / max(abs(theirs), 1e-12),
                      "hystmpc_ipopt_ms": 1e3 * t_ours, "do_mpc_ms": 1e3 * t_theirs})
     return {"bench": bench_name, "cases": rows}
 
 
-def time_do_mpc_closed_loop(bench_name: str = "pam", duration: float = 4.0) -> dict:
-    """do-mpc's per-step time over a closed-loop run (the same plant and EKF as hystmpc)."""
-    from experiments.benches import get_bench
-    from experiments.runner import reference_samples
-    bench = get_bench(bench_name)
-    config = bench.defaults()
-    adapter = bench.controllers["nmpc"].build(config)
-    ctl = adapter.controller
-    mpc, state = do_mpc_problem(ctl.nmpc)
-    scenario = bench.scenarios[bench.default_scenario]
-    t, ref = reference_samples(scenario, bench.sample_period, duration)
-    N = ctl.nmpc.settings.horizon
-    padded = np.concatenate((ref, np.full(N + 1, ref[-1])))
-    plant = bench.make_plant(config)
-    meas = plant.reset(0)
-    times, u_last = [], 0.0
-    ctl.reset()
-    est = ctl.estimator
-    z = adapter.sensors(meas)
-    est.reset(np.asarray(ctl.initial_state(z), float), np.zeros(ctl.nmpc.model.nd), ctl.initial_covariance)
-    for k in range(len(t)):
-        if k > 0:
-            est.predict([u_last])
-        est.update(adapter.sensors(meas))
-        state["refs"] = np.concatenate(([padded[k + 1]], padded[k + 1: k + N + 1]))
-        state["d"] = est.d.copy()
+class DoMpcController:
+    """do-mpc solving hystmpc's problem, behind hystmpc's own observer (a :class:`Controller`)."""
+
+    def __init__(self, nmpc_controller):
+        self.inner = nmpc_controller
+        self.horizon = nmpc_controller.horizon
+        self.mpc, self.state = do_mpc_problem(nmpc_controller.problem)
+        self.solve_times: list[float] = []
+
+    def reset(self) -> None:
+        """Start again: the observer, the first-step initial guess, the timings."""
+        self.inner.observer.reset()
+        self._u_last = None
+        self.solve_times = []
+        self.predicted_output = float("nan")
+
+    def step(self, measurement, ref_window) -> float:
+        """do-mpc's input for this sample."""
+        observer = self.inner.observer
+        observer.update(self.inner.sensors(measurement), self._u_last)
+        est = observer.estimate(self.horizon)
+        u_last = 0.0 if self._u_last is None else self._u_last
+        self.state["refs"] = np.concatenate(([ref_window[1]], ref_window[1:]))
+        self.state["d"] = est.d.copy()
         x0 = np.concatenate((est.x, [u_last]))
-        if k == 0:
-            mpc.x0 = x0
-            mpc.u0 = np.array([u_last])
-            mpc.set_initial_guess()
+        if self._u_last is None:
+            self.mpc.x0 = x0
+            self.mpc.u0 = np.array([u_last])
+            self.mpc.set_initial_guess()
         with _quiet_peer():
             start = time.perf_counter()
-            u = float(np.asarray(mpc.make_step(x0)).ravel()[0])
-            times.append(time.perf_counter() - start)
-        u_last = u
-        meas = plant.step(u)
-    ms = 1e3 * np.asarray(times)
+            u = float(np.asarray(self.mpc.make_step(x0)).ravel()[0])
+            self.solve_times.append(time.perf_counter() - start)
+        self._u_last = u
+        return u
+
+    def stats(self) -> None:
+        return None
+
+
+def time_do_mpc_closed_loop(bench_name: str = "pam", duration: float = 4.0) -> dict:
+    """do-mpc's per-step time over a closed-loop run (the same plant and EKF as hystmpc)."""
+    from hystmpc.experiments.benches import get_bench
+    bench = get_bench(bench_name)
+    prepared = bench.prepare(bench.default_scenario, "nmpc")
+    peer = DoMpcController(prepared.controller)
+    bench.run(bench.default_scenario, "nmpc", duration=duration, prepared=replace(prepared, controller=peer))
+    ms = 1e3 * np.asarray(peer.solve_times)
     return {"bench": bench_name, "steps": len(ms), "step_ms_median": float(np.median(ms)),
             "step_ms_p95": float(np.percentile(ms, 95)), "ca_version": ca.__version__}
 
@@ -187,12 +196,12 @@ def benchmark(bench_name: str = "pam", duration: float = 20.0) -> dict:
     from pathlib import Path
     from tempfile import TemporaryDirectory
 
-    from experiments.benches import get_bench
-    from experiments.realtime import speed
+    from hystmpc.experiments.benches import get_bench
+    from hystmpc.experiments.realtime import speed
     bench = get_bench(bench_name)
     theirs = time_do_mpc_closed_loop(bench_name, duration)
     with TemporaryDirectory() as tmp:
-        ours = speed(bench, bench.defaults(), ["rti-c"], duration, Path(tmp))
+        ours = speed(bench, bench.configure(), ["rti-c"], duration, Path(tmp))
     rti_c = ours["variants"][0]
     return {"bench": bench_name, "duration_s": duration, "do_mpc_step_ms_median": theirs["step_ms_median"],
             "rti_c_solve_ms_median": rti_c["solve_ms_median"], "rti_c_step_ms_median": rti_c["step_ms_median"],
@@ -201,7 +210,7 @@ def benchmark(bench_name: str = "pam", duration: float = 20.0) -> dict:
             "ratio_standalone": theirs["step_ms_median"] / (ours["standalone_c"]["median_us"] / 1e3)}
 
 
-if __name__ == "__main__":  # python -m experiments.peer [BENCH]: the benchmark, as JSON
+if __name__ == "__main__":  # python -m hystmpc.experiments.peer [BENCH]: the benchmark, as JSON
     import json
     import sys
     print(json.dumps(benchmark(sys.argv[1] if len(sys.argv) > 1 else "pam"), indent=1))

@@ -1,6 +1,6 @@
 """Real time: code-generated RTI solvers (``hystmpc codegen``) and speed per variant (``hystmpc speed``).
 
-The RTI step of a bench's NMPC (:mod:`mpc.rti`) is written as self-contained C99 (qrqp
+The RTI step of a bench's NMPC (:mod:`hystmpc.mpc.rti`) is written as self-contained C99 (qrqp
 included, needs only libm), with a header, a small C ``main`` that replays recorded solver
 inputs without Python, and a Makefile. It is compiled with the system C compiler and
 loaded back into Python; ``verify`` runs the bench's default scenario closed loop with the
@@ -17,10 +17,8 @@ from pathlib import Path
 
 import casadi as ca
 import numpy as np
-
-from experiments.bench import Bench
-from experiments.runner import simulate
-from mpc.rti import _accept_last_qp_iterate
+from hystmpc.experiments.bench import Bench
+from hystmpc.mpc.rti import _accept_last_qp_iterate
 
 MAIN_C = r"""/* Replays recorded RTI inputs through rti_step without Python; prints timings.
    Input file: first line "n_w n_p count", then count lines of n_w + n_p numbers (w0, p).
@@ -110,16 +108,11 @@ class RecordingStep:
         return self.fun(w0, p)
 
 
-def _inner(controller):
-    """The NMPC controller behind a bench adapter (``NmpcAdapter``) or the controller itself."""
-    return getattr(controller, "controller", controller)
-
-
-def _nmpc_of(controller):
-    nmpc = getattr(_inner(controller), "nmpc", None)
-    if getattr(nmpc, "rti", None) is None:
+def _problem_of(controller):
+    problem = getattr(controller, "problem", None)
+    if getattr(problem, "rti", None) is None:
         raise ValueError("this bench's nmpc has no RTI step")
-    return nmpc
+    return problem
 
 
 def _rti_config(bench: Bench, config: dict, solver: str) -> dict:
@@ -144,10 +137,10 @@ def write_solver(bench: Bench, config: dict, out: Path) -> ca.Function:
     """Write the bench's RTI step as C (+ header, ``main.c``, Makefile) into ``out``, build
     the shared library and the replay program, and return the compiled step loaded back."""
     config = _rti_config(bench, config, "rti")
-    nmpc = _nmpc_of(bench.controllers["nmpc"].build(config))
+    problem = _problem_of(bench.build_controller("nmpc", config))
     out.mkdir(parents=True, exist_ok=True)
     gen = ca.CodeGenerator("rti_step.c", {"with_header": True})
-    gen.add(nmpc.rti)
+    gen.add(problem.rti)
     gen.generate(str(out) + "/")
     (out / "rti_step.c").write_text(_accept_last_qp_iterate((out / "rti_step.c").read_text()))
     (out / "main.c").write_text(MAIN_C)
@@ -180,17 +173,15 @@ def codegen(bench: Bench, config: dict, out: Path, verify: bool, duration: float
     config = _rti_config(bench, config, "rti")
     results, recorded = {}, None
     for label in ("in-process", "compiled"):
-        controller = bench.controllers["nmpc"].build(config)
-        nmpc = _nmpc_of(controller)
-        nmpc.rti = RecordingStep(nmpc.rti if label == "in-process" else compiled)
-        spec = replace(bench.controllers["nmpc"], build=lambda c, ctrl=controller: ctrl)
-        run = simulate(replace(bench, controllers={**bench.controllers, "nmpc": spec}), scenario, "nmpc",
-                       config, duration=duration)
-        results[label] = run
+        prepared = bench.prepare(scenario, "nmpc", config)
+        problem = _problem_of(prepared.controller)
+        problem.rti = RecordingStep(problem.rti if label == "in-process" else compiled)
+        results[label] = bench.run(scenario, "nmpc", duration=duration, prepared=prepared)
         if label == "in-process":
-            recorded = np.asarray(nmpc.rti.calls)
-            n_w = nmpc.rti.fun.size1_in(0)
-            in_process_out = np.array([np.asarray(nmpc.rti.fun(c[:n_w], c[n_w:])[0]).ravel() for c in recorded[:200]])
+            recorded = np.asarray(problem.rti.calls)
+            n_w = problem.rti.fun.size1_in(0)
+            in_process_out = np.array([np.asarray(problem.rti.fun(c[:n_w], c[n_w:])[0]).ravel()
+                                       for c in recorded[:200]])
     diff = float(np.max(np.abs(results["in-process"].input - results["compiled"].input)))
     program_out, timing = run_program(out, recorded, n_w, repeats=3)
     program_diff = float(np.max(np.abs(program_out[:200] - in_process_out)))
@@ -209,13 +200,10 @@ def speed(bench: Bench, config: dict, variants, duration: float | None = None, o
     period_ms = 1e3 * bench.sample_period
     rows = []
     for variant in variants:
-        cfg = _rti_config(bench, config, variant)
-        controller = bench.controllers["nmpc"].build(cfg)
-        spec = replace(bench.controllers["nmpc"], build=lambda c, ctrl=controller: ctrl)
+        prepared = bench.prepare(scenario, "nmpc", _rti_config(bench, config, variant))
         start = time.perf_counter()
-        run = simulate(replace(bench, controllers={**bench.controllers, "nmpc": spec}), scenario, "nmpc", cfg,
-                       duration=duration)
-        solve_ms = 1e3 * np.asarray(getattr(_inner(controller), "solve_times", [np.nan]))
+        run = bench.run(scenario, "nmpc", duration=duration, prepared=prepared)
+        solve_ms = 1e3 * np.asarray(getattr(prepared.controller, "solve_times", [np.nan]))
         rows.append({"variant": variant, "rmse": run.metrics["rmse"], **run.timing,
                      "solve_ms_median": float(np.median(solve_ms)), "solve_ms_p95": float(np.percentile(solve_ms, 95)),
                      "solve_ms_max": float(np.max(solve_ms)), "failures": run.solver["failures"],

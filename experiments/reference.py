@@ -6,8 +6,7 @@ import csv
 from pathlib import Path
 
 import numpy as np
-
-from experiments.bench import Bench, Scenario
+from hystmpc.experiments.bench import Bench, Scenario
 
 
 def load_reference(path: str | Path, bench: Bench) -> Scenario:

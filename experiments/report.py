@@ -6,12 +6,9 @@ import csv
 import datetime as dt
 import json
 from pathlib import Path
-from typing import Any
 
 import numpy as np
-
-from experiments.bench import Bench
-from experiments.runner import RunResult
+from hystmpc.experiments.runner import RunResult
 
 SCHEMA = "hystmpc.results/1"
 
@@ -26,27 +23,11 @@ def version() -> str:
         return "0+unknown"
 
 
-def run_entry(bench: Bench, run: RunResult) -> dict[str, Any]:
-    """One element of the document's ``runs`` list."""
-    entry: dict[str, Any] = {
-        "scenario": run.scenario, "controller": run.controller, "seed": run.seed,
-        "units": run.units, "sample_period_s": run.sample_period,
-        "metrics": run.metrics, "timing": run.timing,
-    }
-    if run.solver is not None:
-        entry["solver"] = run.solver
-    paper = bench.paper_figures.get((run.scenario, run.controller))
-    if paper:
-        entry["paper"] = dict(paper)
-    entry["parameters"] = run.parameters
-    return entry
-
-
-def results_document(bench: Bench, runs: list[RunResult], command: list[str] | None = None) -> dict:
-    """The full result document for a list of runs."""
-    doc = {"schema": SCHEMA, "bench": bench.name,
+def results_document(bench: str, runs: list[RunResult], command: list[str] | None = None) -> dict:
+    """The full result document (``hystmpc.results/1``) for a list of runs on bench ``bench``."""
+    doc = {"schema": SCHEMA, "bench": bench,
            "created": dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
-           "version": version(), "runs": [run_entry(bench, r) for r in runs]}
+           "version": version(), "runs": [r.to_json() for r in runs]}
     if command is not None:
         doc["command"] = command
     return json_safe(doc)
@@ -123,12 +104,13 @@ def _fmt(value, digits=3) -> str:
     return f"{value:.{digits}g}" if abs(value) < 1e-2 and value != 0 else f"{value:.{digits}f}"
 
 
-def comparison_table(bench: Bench, runs: list[RunResult]) -> str:
+def comparison_table(runs: list[RunResult]) -> str:
     """Markdown table (readable in a terminal) of every run, like a paper's table."""
     stepped = any("overshoot_pct" in r.metrics for r in runs)
-    head = ["scenario", "controller", f"RMSE [{bench.units}]", f"MAE [{bench.units}]", f"max abs error [{bench.units}]"]
+    units = runs[0].units if runs else ""
+    head = ["scenario", "controller", f"RMSE [{units}]", f"MAE [{units}]", f"max abs error [{units}]"]
     if stepped:
-        head += ["overshoot [%]", "settling 2% [s]", f"ss error [{bench.units}]"]
+        head += ["overshoot [%]", "settling 2% [s]", f"ss error [{units}]"]
     head += ["ms/step median", "ms/step p95", "fails/fallbacks"]
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
     for r in runs:

@@ -1,26 +1,79 @@
-"""Closed-loop simulation of one controller on one scenario: ``simulate(...) -> RunResult``."""
+"""Closed loop: ``simulate(plant, controller, reference) -> RunResult``.
+
+Any plant (:class:`hystmpc.plants.base.Plant`) with any controller (:class:`Controller`): the
+benches, code generation checks, speed measurements, peer comparisons and tests all run
+through :func:`simulate`.
+"""
 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from pathlib import Path
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
+from hystmpc.experiments.metrics import step_metrics, tracking_metrics
+from hystmpc.plants.base import Measurement, Plant
 
-from experiments.bench import Bench, Scenario
-from experiments.metrics import step_metrics, tracking_metrics
+
+@runtime_checkable
+class Controller(Protocol):
+    """Shape shared by every controller: ``reset()``, then ``step(measurement, ref_window)``.
+
+    ``ref_window`` holds the reference at this sample and the next ``horizon`` ones.
+    Optionally a controller has ``predicted_output`` (its model's one-step-ahead
+    prediction of this sample's output, for the run's CSV).
+    """
+
+    horizon: int
+    """Future reference samples the controller wants beyond the current one (0: causal)."""
+
+    def reset(self) -> None: ...
+
+    def step(self, measurement: Measurement, ref_window: np.ndarray) -> float: ...
+
+    def stats(self) -> dict | None: ...
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A reference trajectory with a name and a duration."""
+
+    name: str
+    description: str
+    duration: float
+    """Length of the run (s)."""
+    reference: Callable[[np.ndarray], np.ndarray]
+    """Reference as a function of time (vectorised)."""
+    conditions: tuple[str, ...] = ()
+    """Operating conditions the scenario fixes, as ``--set`` assignments (``rig.gap_mm=1.2``)."""
+
+
+@dataclass(frozen=True)
+class Labels:
+    """How to name a run's signals in tables and figures."""
+
+    output_name: str = "output"
+    """The tracked output (``angle``, ``torque``...)."""
+    units: str = ""
+    """Units of the output."""
+    input_units: str = ""
+    """Units of the input."""
+    loop: tuple[str, str, str, str] | None = None
+    """Hysteresis-loop plot: (truth key on x, truth key on y, x label, y label)."""
+    title: str = ""
+    """Figure title."""
 
 
 @dataclass
 class RunResult:
     """Trajectories and figures of one run."""
 
-    bench: str
     scenario: str
     controller: str
     seed: int
-    units: str
     sample_period: float
     t: np.ndarray
     reference: np.ndarray
@@ -31,7 +84,17 @@ class RunResult:
     step_times: np.ndarray
     metrics: dict[str, float]
     solver: dict | None
+    labels: Labels = field(default_factory=Labels)
     parameters: dict[str, Any] = field(default_factory=dict)
+    """The parameters that made the run (a bench's configuration)."""
+    paper: dict[str, float] | None = None
+    """The paper's figures for this scenario and controller, where there are some."""
+    bench: str = ""
+
+    @property
+    def units(self) -> str:
+        """Units of the output."""
+        return self.labels.units
 
     @property
     def timing(self) -> dict[str, float]:
@@ -40,45 +103,79 @@ class RunResult:
         return {"step_ms_median": float(np.median(ms)), "step_ms_p95": float(np.percentile(ms, 95)),
                 "step_ms_max": float(ms.max())}
 
+    def to_json(self) -> dict[str, Any]:
+        """The run as an element of a result document's ``runs`` (interface.md), strict JSON."""
+        from hystmpc.experiments.report import json_safe
+        entry: dict[str, Any] = {
+            "scenario": self.scenario, "controller": self.controller, "seed": self.seed, "units": self.units,
+            "sample_period_s": self.sample_period, "metrics": self.metrics, "timing": self.timing,
+        }
+        if self.solver is not None:
+            entry["solver"] = self.solver
+        if self.paper:
+            entry["paper"] = dict(self.paper)
+        entry["parameters"] = self.parameters
+        return json_safe(entry)
 
-def reference_samples(scenario: Scenario, dt: float, duration: float | None = None):
-    """Sample times and reference values of a scenario at period ``dt``."""
-    duration = scenario.duration if duration is None else duration
-    n = int(round(duration / dt))
-    t = dt * np.arange(n)
-    return t, np.asarray(scenario.reference(t), float)
+    def plot(self, path: str | Path | None = None, others: list[RunResult] = ()):
+        """The figure ``compare`` draws for a scenario: tracking, error, input, hysteresis loop.
+
+        ``others`` are more runs on the same reference. Saved to ``path`` if given (returns
+        the path), else returned as a matplotlib Figure.
+        """
+        from hystmpc.experiments.plots import scenario_figure
+        return scenario_figure([self, *others], path)
 
 
-def simulate(bench: Bench, scenario: Scenario, controller_name: str, config: dict[str, Any],
-             seed: int = 0, duration: float | None = None, progress=None) -> RunResult:
-    """Run ``controller_name`` on ``scenario`` against the bench's plant.
+def reference_samples(reference, dt: float, duration: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Sample times and reference values at period ``dt``.
+
+    ``reference`` is a :class:`Scenario`, a function of time (then ``duration`` is needed)
+    or an array of samples at ``dt`` (``duration`` may shorten it).
+    """
+    if isinstance(reference, Scenario):
+        duration = reference.duration if duration is None else duration
+        reference = reference.reference
+    if callable(reference):
+        if duration is None:
+            raise ValueError("a reference given as a function of time needs a duration")
+        n = int(round(duration / dt))
+        t = dt * np.arange(n)
+        return t, np.asarray(reference(t), float)
+    values = np.asarray(reference, float).ravel()
+    n = len(values) if duration is None else min(len(values), int(round(duration / dt)))
+    return dt * np.arange(n), values[:n]
+
+
+def simulate(plant: Plant, controller: Controller, reference, duration: float | None = None, seed: int = 0, *,
+             name: str | None = None, scenario: str | None = None, labels: Labels = Labels(),
+             progress: Callable[[int], Any] | None = None) -> RunResult:
+    """Run ``controller`` against ``plant`` along ``reference``.
 
     Parameters
     ----------
-    bench : Bench
-        The bench.
-    scenario : Scenario
-        Reference trajectory.
-    controller_name : str
-        One of ``bench.controllers``.
-    config : dict
-        Parameter groups (``bench.defaults()`` with any overrides).
+    plant : Plant
+        Reset with ``seed``, then stepped once per sample.
+    controller : Controller
+        Reset first; it sees the measurement and ``controller.horizon`` samples of preview
+        (the reference is held at its last value beyond the end).
+    reference : Scenario, callable or array_like
+        See :func:`reference_samples`.
+    duration : float, optional
+        Length of the run (s); default: the scenario's or the array's.
     seed : int
         Seed of the plant's sensor noise.
-    duration : float, optional
-        Override of the scenario's duration (s).
+    name, scenario : str, optional
+        Names of the controller and the reference in the result.
+    labels : Labels
+        Signal names and units for the result's table and figures.
     progress : callable, optional
-        Called with the number of samples done after each sample.
+        Called with 1 after each sample.
     """
-    if controller_name not in bench.controllers:
-        raise ValueError(f"unknown controller {controller_name!r}; allowed: {', '.join(bench.controllers)}")
-    if scenario.conditions:
-        from experiments.config import apply_overrides
-        config = apply_overrides(config, list(scenario.conditions))
-    dt = bench.sample_period
-    t, ref = reference_samples(scenario, dt, duration)
-    plant = bench.make_plant(config)
-    controller = bench.controllers[controller_name].build(config)
+    dt = plant.sample_period
+    t, ref = reference_samples(reference, dt, duration)
+    if len(t) < 2:
+        raise ValueError(f"the run needs at least 2 samples at {dt:g} s, got {len(t)}")
     controller.reset()
     horizon = controller.horizon
     ref_padded = np.concatenate((ref, np.full(horizon, ref[-1])))
@@ -95,7 +192,8 @@ def simulate(bench: Bench, scenario: Scenario, controller_name: str, config: dic
         step_times[k] = time.perf_counter() - start
         pred[k] = getattr(controller, "predicted_output", float("nan"))
         if not np.isfinite(u):
-            raise RuntimeError(f"controller {controller_name} produced a non-finite input {u} at t={t[k]:.3f}")
+            raise RuntimeError(f"controller {name or type(controller).__name__} produced a non-finite input {u} "
+                               f"at t={t[k]:.3f}")
         u_hist[k] = u
         if k < n - 1:
             meas = plant.step(u)
@@ -105,13 +203,9 @@ def simulate(bench: Bench, scenario: Scenario, controller_name: str, config: dic
     span = float(np.ptp(ref))
     if span > 0 and np.any(np.abs(np.diff(ref)) > 0.25 * span):  # a stepped reference
         metrics.update(step_metrics(t, ref, out, min_step=0.25 * span) or {})
-    return RunResult(bench=bench.name, scenario=scenario.name, controller=controller_name, seed=seed,
-                     units=bench.units, sample_period=dt, t=t, reference=ref, output=out, input=u_hist,
-                     predicted=pred, truth={k: np.asarray(v) for k, v in truth.items()},
-                     step_times=step_times, metrics=metrics, solver=controller.stats(),
-                     parameters=_describe(config))
-
-
-def _describe(config):
-    from experiments.config import describe
-    return describe(config)
+    if scenario is None:
+        scenario = reference.name if isinstance(reference, Scenario) else "reference"
+    return RunResult(scenario=scenario, controller=name or type(controller).__name__, seed=seed,
+                     sample_period=dt, t=t, reference=ref, output=out, input=u_hist, predicted=pred,
+                     truth={k: np.asarray(v) for k, v in truth.items()}, step_times=step_times,
+                     metrics=metrics, solver=controller.stats(), labels=labels)

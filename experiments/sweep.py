@@ -121,8 +121,8 @@ def load_spec(path: str | Path, extra_overrides: Iterable[str] = (), duration: f
     SpecError
         Naming the file, the bad entry and what is allowed.
     """
-    from experiments.benches import BENCH_NAMES, get_bench
-    from experiments.config import allowed_keys, apply_overrides, get_value
+    from hystmpc.experiments.benches import BENCH_NAMES, get_bench
+    from hystmpc.experiments.config import allowed_keys, get_value
 
     path = Path(path)
     try:
@@ -158,7 +158,7 @@ def load_spec(path: str | Path, extra_overrides: Iterable[str] = (), duration: f
         _fail(path, "set must be a list of 'KEY=VALUE' strings")
     overrides = tuple(overrides) + tuple(extra_overrides)
     try:
-        config = apply_overrides(bench.defaults(), list(overrides))
+        config = bench.configure(overrides)
     except ValueError as exc:
         _fail(path, str(exc))
 
@@ -195,7 +195,7 @@ def perturbation_factors(spec: SweepSpec, sample: int) -> dict[str, float]:
 
 def scaled_assignments(config: dict[str, Any], factors: dict[str, float]) -> list[str]:
     """``KEY=VALUE`` assignments scaling each parameter by its factor (tuples element-wise)."""
-    from experiments.config import get_value
+    from hystmpc.experiments.config import get_value
     assignments = []
     for key, factor in factors.items():
         value = get_value(config, key)
@@ -213,9 +213,8 @@ def run_id(scenario: str, controller: str, seed: int, sample: int) -> str:
 
 def make_tasks(spec: SweepSpec) -> list[RunTask]:
     """Every run of the sweep, in a fixed order."""
-    from experiments.benches import get_bench
-    from experiments.config import apply_overrides
-    base = apply_overrides(get_bench(spec.bench).defaults(), list(spec.overrides))
+    from hystmpc.experiments.benches import get_bench
+    base = get_bench(spec.bench).configure(spec.overrides)
     tasks = []
     for sample in range(spec.samples):
         factors = perturbation_factors(spec, sample)
@@ -230,10 +229,8 @@ def make_tasks(spec: SweepSpec) -> list[RunTask]:
 
 def execute(task: RunTask) -> dict[str, Any]:
     """Run one task and return its record; an exception inside the run becomes an ``error`` record."""
-    from experiments.benches import get_bench
-    from experiments.config import apply_overrides
-    from experiments.report import json_safe, version
-    from experiments.runner import simulate
+    from hystmpc.experiments.benches import get_bench
+    from hystmpc.experiments.report import json_safe, version
     record: dict[str, Any] = {
         "schema": RECORD_SCHEMA, "run_id": task.run_id, "bench": task.bench, "scenario": task.scenario,
         "controller": task.controller, "seed": task.seed, "sample": task.sample,
@@ -242,9 +239,8 @@ def execute(task: RunTask) -> dict[str, Any]:
     start = time.perf_counter()
     try:
         bench = get_bench(task.bench)
-        config = apply_overrides(bench.defaults(), list(task.overrides))
-        run = simulate(bench, bench.scenarios[task.scenario], task.controller, config, seed=task.seed,
-                       duration=task.duration)
+        config = bench.configure(task.overrides)
+        run = bench.run(task.scenario, task.controller, config, seed=task.seed, duration=task.duration)
         record.update(status="ok", metrics=run.metrics, timing=run.timing)
         if run.solver is not None:
             record["solver"] = run.solver
@@ -545,8 +541,8 @@ def run_sweep(spec: SweepSpec, out: Path, workers: int | None = None, executor: 
     resume : bool
         Skip the runs ``out`` already holds; ``out`` must hold a sweep of the same spec.
     """
-    from experiments.benches import get_bench
-    from experiments.report import version
+    from hystmpc.experiments.benches import get_bench
+    from hystmpc.experiments.report import version
 
     workers = workers or os.cpu_count() or 1
     if executor not in ("local", "dask"):
@@ -610,7 +606,7 @@ def run_sweep(spec: SweepSpec, out: Path, workers: int | None = None, executor: 
     summary["run_info"] = {"version": version(), "executor": executor, "workers": workers,
                            "scheduler": scheduler, "ran": len(pending), "skipped": len(tasks) - len(pending),
                            "wall_s": wall}
-    from experiments.report import json_safe
+    from hystmpc.experiments.report import json_safe
     summary = json_safe(summary)
     (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
     write_summary_csv(summary, out / "summary.csv")

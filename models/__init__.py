@@ -1,24 +1,34 @@
-"""Hysteresis models: an exact NumPy step, a smooth CasADi step and an inverse for each.
+"""Hysteresis models (an exact NumPy step, a smooth CasADi step and an inverse for each) and
+the prediction models built from them.
 
-Every model follows one shape (see :mod:`models.maxwell_slip` for the first):
-
-* parameters in a frozen dataclass, validated on construction;
-* ``initial_state(...)`` returns the model's memory as a NumPy array;
-* ``step(state, u) -> (state, y)``: the exact, non-smooth discrete-time definition;
-* ``smooth_step(eps)``: a CasADi ``Function`` ``(state, u) -> (state_next, y)`` in which
-  switching logic is replaced by smooth blends of width ``eps``;
-* ``inverse_step(state, y_target) -> (state, u)``: the input that drives the output to
-  ``y_target`` from ``state``.
-
-The memory is always passed in and returned, never kept on the object.
+Every hysteresis model follows :class:`HysteresisModel` (:mod:`hystmpc.models.base`): the
+memory is a state vector passed in and returned, never kept on the object.
+:func:`build_prediction_model` composes a hysteresis model with an actuator's
+:class:`Dynamics` into the NMPC's prediction model.
 """
 
-from models.lambertw import lambertw, lambertw_function
-from models.maxwell_slip import MaxwellSlip
-from models.parametric import ParametricHysteresis, identify_major_loop
-from models.power_function import PowerFunctionHysteresis, VirtualDeformation
-from models.smooth import smooth_abs, smooth_clip, smooth_max, smooth_min
+from hystmpc.models.base import HysteresisModel
+from hystmpc.models.fckp import Fckp, FckpParams
+from hystmpc.models.fractional import GrunwaldLetnikov, gl_weights
+from hystmpc.models.integrators import rk4
+from hystmpc.models.kp import KrasnoselskiiPokrovskii
+from hystmpc.models.lambertw import lambertw, lambertw_function
+from hystmpc.models.maxwell_slip import MaxwellSlip, play_operator
+from hystmpc.models.parametric import ParametricHysteresis, identify_major_loop
+from hystmpc.models.power_function import PowerFunctionHysteresis, VirtualDeformation
+from hystmpc.models.prandtl_ishlinskii import PrandtlIshlinskii
+from hystmpc.models.prediction import (
+    CreepPredictionModel,
+    Dynamics,
+    InputMemory,
+    PredictionModel,
+    Smoothing,
+    build_prediction_model,
+)
+from hystmpc.models.smooth import smooth_abs, smooth_clip, smooth_max, smooth_min
 
-__all__ = ["MaxwellSlip", "ParametricHysteresis", "PowerFunctionHysteresis", "VirtualDeformation",
-           "identify_major_loop", "lambertw", "lambertw_function", "smooth_abs", "smooth_clip",
-           "smooth_max", "smooth_min"]
+__all__ = ["CreepPredictionModel", "Dynamics", "Fckp", "FckpParams", "GrunwaldLetnikov", "HysteresisModel",
+           "InputMemory", "KrasnoselskiiPokrovskii", "MaxwellSlip", "ParametricHysteresis",
+           "PowerFunctionHysteresis", "PrandtlIshlinskii", "PredictionModel", "Smoothing", "VirtualDeformation",
+           "build_prediction_model", "gl_weights", "identify_major_loop", "lambertw", "lambertw_function",
+           "play_operator", "rk4", "smooth_abs", "smooth_clip", "smooth_max", "smooth_min"]

@@ -1,12 +1,67 @@
-"""What every hysteresis model shares beyond its own step."""
+"""The shape every hysteresis model shares: :class:`HysteresisModel`.
+
+A hysteresis model maps an input sequence to an output sequence with memory. hystmpc
+keeps three faces of each model and one state layout for all of them:
+
+* **state**: a NumPy vector, named by ``state_names``. ``state[0]`` is always the last
+  input, the point the next move is measured from; the rest is the model's memory
+  (element forces, turning points, kernel outputs...). The memory is passed in and
+  returned, never kept on the object, so one model object serves any number of plants,
+  controllers and predictions at once.
+* ``step(state, u) -> (state, y)``: the exact, non-smooth discrete-time definition (the
+  paper's). Plants and feed-forward baselines use it.
+* ``smooth_step(eps, direction_eps=None)``: a CasADi ``Function`` ``(state, u) ->
+  (state_next, y)`` with the switching logic replaced by smooth blends of width ``eps``
+  (and the detection of the input's direction by ``direction_eps`` where the model has
+  one; a model without raises ``ValueError`` when given one). As ``eps -> 0`` it
+  converges to ``step``; each model states how fast in its docstring. The NMPC's
+  prediction models use it.
+* ``inverse_step(state, y_target) -> (state, u)``: an input that drives the output to
+  ``y_target`` from ``state``, and the state after it. Warm starts and inverse
+  feed-forward use it.
+
+``tests/test_hysteresis_contract.py`` runs every model through the same checks.
+"""
 
 from __future__ import annotations
 
+from typing import Protocol, runtime_checkable
+
+import casadi as ca
 import numpy as np
+
+
+@runtime_checkable
+class HysteresisModel(Protocol):
+    """Exact step, smooth CasADi step and inverse of one hysteresis model (see the module)."""
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        """One name per state entry; the first is the last input."""
+
+    def initial_state(self, u0: float = 0.0) -> np.ndarray:
+        """A relaxed (demagnetised) state at input ``u0``."""
+
+    def output(self, state):
+        """Output of a state: a float for a NumPy state, an expression for a CasADi one."""
+
+    def step(self, state, u: float) -> tuple[np.ndarray, float]:
+        """Exact step to input ``u``: ``(state_next, y)``."""
+
+    def smooth_step(self, eps: float, direction_eps: float | None = None) -> ca.Function:
+        """Smooth step ``(state, u) -> (state_next, y)`` as a CasADi Function."""
+
+    def inverse_step(self, state, y_target: float) -> tuple[np.ndarray, float]:
+        """Input that moves the output to ``y_target``, and the state after it: ``(state, u)``."""
 
 
 class SteppedModel:
     """Mixin for models with ``initial_state(u0)`` and ``step(state, u) -> (state, y)``."""
+
+    @property
+    def n_state(self) -> int:
+        """Length of the state vector."""
+        return len(self.state_names)
 
     def simulate(self, inputs, state=None) -> tuple[np.ndarray, np.ndarray]:
         """Exact response to an input sequence; returns ``(outputs, final_state)``.
@@ -18,3 +73,32 @@ class SteppedModel:
         for i, u in enumerate(inputs):
             state, out[i] = self.step(state, u)
         return out, state
+
+
+def symbolic(value) -> bool:
+    """Whether ``value`` is a CasADi expression (``output`` methods then return one too)."""
+    return isinstance(value, (ca.SX, ca.MX))
+
+
+def smooth_function(name: str, n_state: int, expressions) -> ca.Function:
+    """``(state, u) -> (state_next, y)`` from ``expressions(state, u) -> (state_next, y)`` on SX symbols.
+
+    Every model's ``smooth_step`` returns its Function through this, so all share the
+    input and output names ``state``, ``u``, ``state_next``, ``y``.
+    """
+    state = ca.SX.sym("state", n_state)
+    u = ca.SX.sym("u")
+    nxt, y = expressions(state, u)
+    return ca.Function(name, [state, u], [nxt, y], ["state", "u"], ["state_next", "y"])
+
+
+def check_smoothing(eps: float, direction_eps: float | None = None, has_direction: bool = True) -> None:
+    """``ValueError`` unless ``eps > 0`` and ``direction_eps`` is None or > 0 (and allowed)."""
+    if not (np.isfinite(eps) and eps > 0):
+        raise ValueError(f"eps must be finite and > 0, got {eps}")
+    if direction_eps is None:
+        return
+    if not has_direction:
+        raise ValueError("this model detects no input direction: direction_eps does not apply (leave it unset)")
+    if not (np.isfinite(direction_eps) and direction_eps > 0):
+        raise ValueError(f"direction_eps must be finite and > 0, got {direction_eps}")

@@ -6,7 +6,7 @@ actuator gives zero (the shift is a constant kernel, which eq. (5) allows). The 
 the GL fractional *integral* of order α on ``w`` (a constant input rises ∝ t^α, benches.md).
 
 The KP memory is a state vector (``[p_last, ξ_1..ξ_n]``); the creep memory is the whole
-past of ``w`` and lives in a :class:`models.fractional.GrunwaldLetnikov` object.
+past of ``w`` and lives in a :class:`hystmpc.models.fractional.GrunwaldLetnikov` object.
 """
 
 from __future__ import annotations
@@ -15,9 +15,9 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
-
-from models.fractional import GrunwaldLetnikov
-from models.kp import KrasnoselskiiPokrovskii, paper_density, threshold_grid
+from hystmpc.models.base import SteppedModel, smooth_function, symbolic
+from hystmpc.models.fractional import GrunwaldLetnikov
+from hystmpc.models.kp import KrasnoselskiiPokrovskii, paper_density, threshold_grid
 
 
 @dataclass(frozen=True)
@@ -55,8 +55,13 @@ class FckpParams:
             raise ValueError(f"creep_order must be in [0, 1), got {self.creep_order}")
 
 
-class Fckp:
+class Fckp(SteppedModel):
     """FCKP model: KP on the normalised input, then the GL creep integral.
+
+    As a :class:`hystmpc.models.base.HysteresisModel` it is the creep-free part, volts to
+    millimetres (``step``, ``smooth_step``, ``inverse_step``); its state is the KP state, whose
+    first entry is the last input in normalised units ``p``. The creep memory is a separate
+    :class:`GrunwaldLetnikov` object (:meth:`creep`), stepped with :meth:`creep_step`.
 
     Parameters
     ----------
@@ -69,6 +74,16 @@ class Fckp:
         rho1, rho2 = threshold_grid(params.levels, params.delta, params.max_span)
         weights = paper_density(rho1, rho2, params.density_c, params.density_sigma)
         self.kp = KrasnoselskiiPokrovskii(rho1, rho2, weights, params.delta)
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        """The KP state: ``u_last`` (normalised) and the kernel outputs."""
+        return self.kp.state_names
+
+    @property
+    def creep_order(self) -> float:
+        """α of ``D^(−α)``."""
+        return self.params.creep_order
 
     def normalise(self, u):
         """Input voltage to the KP input p ∈ [−1, 1]."""
@@ -86,9 +101,26 @@ class Fckp:
         """Inverse of :meth:`static`."""
         return (2.0 * w / self.params.stroke - 1.0) * self.kp.total_weight
 
-    def initial_state(self) -> np.ndarray:
-        """Demagnetised at zero volts: every kernel at −1."""
-        return self.kp.initial_state(-1.0)
+    def initial_state(self, u0: float = 0.0) -> np.ndarray:
+        """Demagnetised at ``u0`` volts (default zero: every kernel at −1)."""
+        return self.kp.initial_state(float(self.normalise(u0)))
+
+    def output(self, state):
+        """Creep-free displacement w (mm) of a state (NumPy or CasADi)."""
+        w = self.static(self.kp.output(state))
+        return w if symbolic(w) else float(w)
+
+    def mean_static_curve(self, n: int = 401) -> tuple[np.ndarray, np.ndarray]:
+        """Mean of the rising and falling major-loop branches of w(u): ``(u, w)`` on ``n`` voltages."""
+        u = np.linspace(0.0, self.params.u_max, n)
+        state = self.initial_state()
+        up = np.empty(n)
+        for i, v in enumerate(u):
+            state, up[i] = self.step(state, v)
+        down = np.empty(n)
+        for i, v in enumerate(u[::-1]):
+            state, down[i] = self.step(state, v)
+        return u, 0.5 * (up + down[::-1])
 
     def creep(self, window: int | None = None) -> GrunwaldLetnikov:
         """A fresh creep memory: ``D^(−α)`` at step h with memory window ``window``."""
@@ -99,25 +131,27 @@ class Fckp:
         for the same h and full memory, since the GL weights of ±α convolve to 1)."""
         return GrunwaldLetnikov(self.params.creep_order, self.params.sample_period, window)
 
-    def kp_step(self, state, u: float) -> tuple[np.ndarray, float]:
+    def step(self, state, u: float) -> tuple[np.ndarray, float]:
         """Exact KP step to voltage ``u``; returns ``(state, w)`` (creep-free, mm)."""
         state, kappa = self.kp.step(state, float(self.normalise(u)))
         return state, float(self.static(kappa))
 
-    def step(self, state, creep: GrunwaldLetnikov, u: float) -> tuple[np.ndarray, float]:
+    def creep_step(self, state, creep: GrunwaldLetnikov, u: float) -> tuple[np.ndarray, float]:
         """Exact FCKP step: KP, then push w into the creep memory; returns ``(state, W)``."""
-        state, w = self.kp_step(state, u)
+        state, w = self.step(state, u)
         return state, creep.push(w)
 
-    def smooth_kp_step(self, eps: float, direction_eps: float = 0.0) -> ca.Function:
-        """Smooth KP step in volts ``(state, u) -> (state_next, w)`` (CasADi)."""
+    def smooth_step(self, eps: float, direction_eps: float | None = None) -> ca.Function:
+        """Smooth KP step in volts ``(state, u) -> (state_next, w)`` (CasADi); see
+        :meth:`KrasnoselskiiPokrovskii.smooth_step` for the error."""
         inner = self.kp.smooth_step(eps, direction_eps)
-        x = ca.SX.sym("x", self.kp.n_kernels + 1)
-        u = ca.SX.sym("u")
-        x_next, kappa = inner(x, self.normalise(u))
-        return ca.Function("fckp_kp_step", [x, u], [x_next, self.static(kappa)], ["x", "u"], ["x_next", "w"])
 
-    def implicit_inverse(self, state, w_target: float, zeta: float = 0.01) -> tuple[np.ndarray, float]:
+        def expressions(x, u):
+            x_next, kappa = inner(x, self.normalise(u))
+            return x_next, self.static(kappa)
+        return smooth_function("fckp_smooth", self.kp.n_kernels + 1, expressions)
+
+    def inverse_step(self, state, w_target: float, zeta: float = 0.01) -> tuple[np.ndarray, float]:
         """Section 3.2: the voltage whose KP output reaches ``w_target``, searched from the
         last input in steps of ζ (V); returns ``(state, u)``."""
         p_state, p = self.kp.inverse_step(state, float(self.kappa_of(w_target)), -1.0, 1.0,

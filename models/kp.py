@@ -15,9 +15,8 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
-
-from models.base import SteppedModel
-from models.smooth import smooth_clip, smooth_max, smooth_min
+from hystmpc.models.base import SteppedModel, check_smoothing, smooth_function, symbolic
+from hystmpc.models.smooth import smooth_clip, smooth_max, smooth_min
 
 
 def ridge(tau, delta: float):
@@ -94,6 +93,11 @@ class KrasnoselskiiPokrovskii(SteppedModel):
         return len(self.rho1)
 
     @property
+    def state_names(self) -> tuple[str, ...]:
+        """``u_last`` and the kernel outputs ``ξ_1..ξ_n``."""
+        return ("u_last", *(f"kernel_{i + 1}" for i in range(self.n_kernels)))
+
+    @property
     def total_weight(self) -> float:
         """Σ μ: the output spans [−Σμ, Σμ]."""
         return float(self.weights.sum())
@@ -121,8 +125,10 @@ class KrasnoselskiiPokrovskii(SteppedModel):
         xi = self.kernels_step(state, u)
         return np.concatenate(([u], xi)), float((self.weights if weights is None else weights) @ xi)
 
-    def output(self, state) -> float:
-        """κ of a state."""
+    def output(self, state):
+        """κ of a state (NumPy or CasADi)."""
+        if symbolic(state):
+            return ca.dot(ca.DM(self.weights), state[1:])
         return float(self.weights @ np.asarray(state[1:], float))
 
     def smooth_kernels(self, u_last, xi, u, eps: float, direction_eps: float):
@@ -137,16 +143,21 @@ class KrasnoselskiiPokrovskii(SteppedModel):
         down = smooth_min(xi, smooth_clip(-1.0 + 2.0 * (u - self.rho1) / self.delta, 1.0, eps), eps)
         return 0.5 * (1 + s) * up + 0.5 * (1 - s) * down
 
-    def smooth_step(self, eps: float, direction_eps: float = 0.0) -> ca.Function:
-        """Smooth step ``(state, u) -> (state_next, κ)`` as a CasADi Function."""
-        if not eps > 0:
-            raise ValueError(f"eps must be > 0, got {eps}")
+    def smooth_step(self, eps: float, direction_eps: float | None = None) -> ca.Function:
+        """Smooth step ``(state, u) -> (state_next, κ)`` as a CasADi Function.
+
+        Ridge, max/min and direction smoothed (:meth:`smooth_kernels`; direction width
+        ``direction_eps``, default ``eps``). The output error is O(eps) on a reversing input
+        (measured for the DEA's model: 0.038, 0.0040, 0.00041 mm at eps = 1e-2, 1e-3, 1e-4).
+        """
+        check_smoothing(eps, direction_eps)
         direction_eps = direction_eps or eps
-        x = ca.SX.sym("x", self.n_kernels + 1)
-        u = ca.SX.sym("u")
-        xi = self.smooth_kernels(x[0], x[1:], u, eps, direction_eps)
-        kappa = ca.dot(ca.DM(self.weights), xi)
-        return ca.Function("kp_step", [x, u], [ca.vertcat(u, xi), kappa], ["x", "u"], ["x_next", "y"])
+        weights = ca.DM(self.weights)
+
+        def expressions(x, u):
+            xi = self.smooth_kernels(x[0], x[1:], u, eps, direction_eps)
+            return ca.vertcat(u, xi), ca.dot(weights, xi)
+        return smooth_function("kp_smooth", self.n_kernels + 1, expressions)
 
     def inverse_step(self, state, y_target: float, u_min: float = -1.0, u_max: float = 1.0,
                      step: float = 0.01, weights=None) -> tuple[np.ndarray, float]:

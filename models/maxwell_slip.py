@@ -20,9 +20,8 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
-
-from models.base import SteppedModel
-from models.smooth import smooth_clip
+from hystmpc.models.base import SteppedModel, check_smoothing, smooth_function, symbolic
+from hystmpc.models.smooth import smooth_clip
 
 
 @dataclass(frozen=True)
@@ -49,9 +48,9 @@ class MaxwellSlip(SteppedModel):
         return len(self.k)
 
     @property
-    def n_state(self) -> int:
-        """Length of the state vector ``[u_last, F_1..F_M]``."""
-        return 1 + len(self.k)
+    def state_names(self) -> tuple[str, ...]:
+        """``u_last`` and the element forces ``F_1..F_M``."""
+        return ("u_last", *(f"force_{i + 1}" for i in range(self.n_elements)))
 
     @property
     def saturation(self) -> float:
@@ -65,8 +64,10 @@ class MaxwellSlip(SteppedModel):
             raise ValueError(f"forces must have {self.n_elements} entries, got {f.shape}")
         return np.concatenate(([float(u0)], f))
 
-    def output(self, state) -> float:
-        """Output ``Σ F_i`` of a state."""
+    def output(self, state):
+        """Output ``Σ F_i`` of a state (NumPy or CasADi)."""
+        if symbolic(state):
+            return ca.sum1(state[1:])
         return float(np.sum(np.asarray(state)[1:]))
 
     def step(self, state, u: float) -> tuple[np.ndarray, float]:
@@ -89,29 +90,26 @@ class MaxwellSlip(SteppedModel):
         """Element forces after moving the input ``u_from -> u_to``, with ``clip`` smoothed.
 
         Works on CasADi symbols and on NumPy values alike; each element's error against the
-        exact step is at most ``eps / 2`` per call (see :func:`models.smooth.smooth_clip`).
+        exact step is at most ``eps / 2`` per call (see :func:`hystmpc.models.smooth.smooth_clip`).
         """
         return [
             smooth_clip(forces[i] + self.k[i] * (u_to - u_from), self.w[i], eps)
             for i in range(self.n_elements)
         ]
 
-    def smooth_step(self, eps: float) -> ca.Function:
+    def smooth_step(self, eps: float, direction_eps: float | None = None) -> ca.Function:
         """Smooth step as a CasADi Function ``(state, u) -> (state_next, y)``.
 
         Over ``n`` steps the output error against :meth:`step` is at most ``n·M·eps/2``
-        (each smoothed clip errs by at most ``eps/2`` and is 1-Lipschitz).
+        (each smoothed clip errs by at most ``eps/2`` and is 1-Lipschitz). The model has
+        no direction detection, so ``direction_eps`` must stay unset.
         """
-        if not eps > 0:
-            raise ValueError(f"eps must be > 0, got {eps}")
-        state = ca.SX.sym("state", self.n_state)
-        u = ca.SX.sym("u")
-        forces = self.smooth_forces([state[1 + i] for i in range(self.n_elements)], state[0], u, eps)
-        nxt = ca.vertcat(u, *forces)
-        return ca.Function(
-            "maxwell_slip_smooth", [state, u], [nxt, ca.sum1(ca.vertcat(*forces))],
-            ["state", "u"], ["state_next", "y"],
-        )
+        check_smoothing(eps, direction_eps, has_direction=False)
+
+        def expressions(state, u):
+            forces = self.smooth_forces([state[1 + i] for i in range(self.n_elements)], state[0], u, eps)
+            return ca.vertcat(u, *forces), ca.sum1(ca.vertcat(*forces))
+        return smooth_function("maxwell_slip_smooth", self.n_state, expressions)
 
     def inverse_step(self, state, y_target: float) -> tuple[np.ndarray, float]:
         """Input that moves the output from ``state`` to ``y_target``, and the new state.
@@ -119,27 +117,38 @@ class MaxwellSlip(SteppedModel):
         The output is monotone and piecewise linear in ``u`` along a monotone input path, so
         the inverse is exact. Targets outside ``(-Σw, Σw)`` are unreachable: ``ValueError``.
         """
-        state = np.asarray(state, float)
         sat = self.saturation
         if not (np.isfinite(y_target) and -sat < y_target < sat):
             raise ValueError(f"y_target={y_target} is outside the reachable range (-{sat}, {sat})")
-        u0 = state[0]
-        forces = state[1:]
-        y0 = forces.sum()
+        return self.move_to(state, y_target, lambda u, forces: float(forces.sum()), tail_slope=0.0)
+
+    def move_to(self, state, y_target: float, output_of, tail_slope: float) -> tuple[np.ndarray, float]:
+        """The monotone input move from ``state`` after which ``output_of(u, forces)`` is ``y_target``.
+
+        ``output_of`` must be continuous, monotone and piecewise linear in ``u`` with kinks
+        only where an element saturates, and grow with ``tail_slope`` once all have
+        (0: bounded, the target must be reached before). Returns ``(state, u)``.
+        """
+        state = np.asarray(state, float)
+        u0, forces = float(state[0]), state[1:]
+        y0 = output_of(u0, forces)
         if y_target == y0:
-            return state.copy(), float(u0)
+            return state.copy(), u0
         direction = 1.0 if y_target > y0 else -1.0
-        k = np.asarray(self.k)
-        room = (direction * np.asarray(self.w) - forces) * direction  # input distance to saturate
+        k, w = np.asarray(self.k), np.asarray(self.w)
+        room = (direction * w - forces) * direction  # input distance to saturate
         breaks = np.sort(np.unique(np.maximum(room / k, 0.0)))
         du_prev, y_prev = 0.0, y0
         for du in breaks:
-            y_here = np.sum(np.clip(forces + direction * k * du, -np.asarray(self.w), np.asarray(self.w)))
+            y_here = output_of(u0 + direction * du, np.clip(forces + direction * k * du, -w, w))
             if (y_here - y_target) * direction >= 0:
                 slope = (y_here - y_prev) / (du - du_prev)
                 du_hit = du_prev + (y_target - y_prev) / slope
                 return self.step(state, u0 + direction * du_hit)[0], float(u0 + direction * du_hit)
             du_prev, y_prev = du, y_here
+        if tail_slope > 0:
+            du_hit = du_prev + (y_target - y_prev) * direction / tail_slope
+            return self.step(state, u0 + direction * du_hit)[0], float(u0 + direction * du_hit)
         raise RuntimeError("unreachable: target inside the saturation band was not bracketed")
 
 

@@ -19,10 +19,9 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
-
-from models.base import SteppedModel
-from models.lambertw import lambertw, lambertw_expr
-from models.smooth import smooth_max, smooth_min
+from hystmpc.models.base import SteppedModel, check_smoothing, smooth_function, symbolic
+from hystmpc.models.lambertw import lambertw, lambertw_expr
+from hystmpc.models.smooth import smooth_max, smooth_min
 
 
 @dataclass(frozen=True)
@@ -40,7 +39,9 @@ class ParametricHysteresis(SteppedModel):
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be finite and > 0, got {value}")
 
-    n_state = 5
+    state_names = ("u_last", "direction", "u_extremum", "v_extremum", "v_last")
+    """Last input, direction since the last extremum (±1), input and output at that extremum,
+    last output."""
 
     def initial_state(self, u0: float = 0.0, v0: float | None = None, direction: float = 1.0) -> np.ndarray:
         """Memory at an extremum (u0, v0) (default v0 = u0: demagnetised) moving in ``direction``."""
@@ -49,9 +50,9 @@ class ParametricHysteresis(SteppedModel):
             raise ValueError(f"|v0 - u0| = {abs(v0 - u0)} exceeds p1 = {self.p1}: outside the asymptotes")
         return np.array([u0, 1.0 if direction >= 0 else -1.0, u0, v0, v0])
 
-    def output(self, state) -> float:
-        """Output of a state."""
-        return float(state[4])
+    def output(self, state):
+        """Output of a state (NumPy or CasADi)."""
+        return state[4] if symbolic(state) else float(state[4])
 
     @staticmethod
     def _update_memory(state, u):
@@ -113,32 +114,34 @@ class ParametricHysteresis(SteppedModel):
             out[k] = v_last
         return out
 
-    def smooth_step(self, eps: float) -> ca.Function:
-        """Smooth H step ``(state, u) -> (state_next, v)``: direction and extremum blended.
+    def smooth_step(self, eps: float, direction_eps: float | None = None) -> ca.Function:
+        """Smooth H step ``(state, u) -> (state_next, y)``: direction and extremum blended.
 
-        ``t = tanh(Δu/eps)``; the direction moves to ``sign`` by ``t²`` (a standing input keeps
-        it) and the memory (u0, v0) blends to (u_last, v_last) by the reversal weight
-        ``t²·|target − s|/2``; ``|u − u0|`` is ``sqrt((u − u0)² + eps²)``.
+        ``t = tanh(Δu/direction_eps)`` (default width ``eps``); the direction moves to
+        ``sign`` by ``t²`` (a standing input keeps it) and the memory (u0, v0) blends to
+        (u_last, v_last) by the reversal weight ``t²·|target − s|/2``; ``|u − u0|`` is
+        ``sqrt((u − u0)² + eps²)``. The error against :meth:`step` is O(eps) once the
+        widths are below the input change per step.
         """
-        if not eps > 0:
-            raise ValueError(f"eps must be > 0, got {eps}")
-        x = ca.SX.sym("state", 5)
-        u = ca.SX.sym("u")
-        u_last, s, u0, v0, v_last = (x[i] for i in range(5))
-        t = ca.tanh((u - u_last) / eps)
-        moved = t * t
-        s_new = s + moved * (t - s)
-        reversal = moved * (1 - t * s) / 2  # 1 when the move reverses the direction
-        u0_new = u0 + reversal * (u_last - u0)
-        v0_new = v0 + reversal * (v_last - v0)
-        # m lies in [0, 2 p1] for any state inside the asymptotes; clamping it (smoothly)
-        # keeps the Lambert W argument positive on every NLP iterate, so no NaN.
-        m = self.p1 + s_new * (v0_new - u0_new)
-        m = smooth_min(smooth_max(m, 1e-3 * self.p1, 1e-3 * self.p1), 2 * self.p1, 1e-3 * self.p1)
-        du = ca.sqrt((u - u0_new) ** 2 + eps**2)
-        v = u - u0_new + v0_new + s_new * (lambertw_expr(self.p2 * m * ca.exp(self.p2 * (m - du))) / self.p2 - m)
-        return ca.Function("parametric_smooth", [x, u], [ca.vertcat(u, s_new, u0_new, v0_new, v), v],
-                           ["state", "u"], ["state_next", "v"])
+        check_smoothing(eps, direction_eps)
+        width = eps if direction_eps is None else direction_eps
+
+        def expressions(x, u):
+            u_last, s, u0, v0, v_last = (x[i] for i in range(5))
+            t = ca.tanh((u - u_last) / width)
+            moved = t * t
+            s_new = s + moved * (t - s)
+            reversal = moved * (1 - t * s) / 2  # 1 when the move reverses the direction
+            u0_new = u0 + reversal * (u_last - u0)
+            v0_new = v0 + reversal * (v_last - v0)
+            # m lies in [0, 2 p1] for any state inside the asymptotes; clamping it (smoothly)
+            # keeps the Lambert W argument positive on every NLP iterate, so no NaN.
+            m = self.p1 + s_new * (v0_new - u0_new)
+            m = smooth_min(smooth_max(m, 1e-3 * self.p1, 1e-3 * self.p1), 2 * self.p1, 1e-3 * self.p1)
+            du = ca.sqrt((u - u0_new) ** 2 + eps**2)
+            v = u - u0_new + v0_new + s_new * (lambertw_expr(self.p2 * m * ca.exp(self.p2 * (m - du))) / self.p2 - m)
+            return ca.vertcat(u, s_new, u0_new, v0_new, v), v
+        return smooth_function("parametric_smooth", 5, expressions)
 
 
 def major_loop(op: ParametricHysteresis, current) -> np.ndarray:

@@ -29,9 +29,8 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
-
-from models.base import SteppedModel
-from models.smooth import smooth_max, smooth_min
+from hystmpc.models.base import SteppedModel, check_smoothing, smooth_function, symbolic
+from hystmpc.models.smooth import smooth_max, smooth_min
 
 # zhou2024 Table V: (s, τ [N m]); s in the paper's scaled units (see VirtualDeformation).
 TABLE_V = {
@@ -142,7 +141,9 @@ class PowerFunctionHysteresis(SteppedModel):
         return smooth_max(smooth_min(w * bp + (1 - w) * bn, hi, 0.01), lo, 0.01)
 
     # ----- the common model shape --------------------------------------------------------------
-    n_state = 6
+    state_names = ("s_last", "up", "s01", "s02", "tau_r", "tau")
+    """Last input, direction flag (1 while s increases), turning points, torque at the last
+    reversal, torque."""
 
     def initial_state(self, s0: float | None = None) -> np.ndarray:
         """Resting on the ascending polyline at ``s0`` (default: where τ_al = 0)."""
@@ -150,9 +151,9 @@ class PowerFunctionHysteresis(SteppedModel):
         tau = float(self.tau_ascending(s0))
         return np.array([s0, 1.0, s0, s0 - self.delta_s1(s0), tau, tau])
 
-    def output(self, state) -> float:
-        """Torque of a state."""
-        return float(state[5])
+    def output(self, state):
+        """Torque of a state (NumPy or CasADi)."""
+        return state[5] if symbolic(state) else float(state[5])
 
     def _up_branch(self, s, s01, s02, tau_r):
         if s >= s01:
@@ -219,7 +220,7 @@ class PowerFunctionHysteresis(SteppedModel):
         return self.step(state, s)[0], s
 
     def smooth_step(self, eps: float, direction_eps: float | None = None) -> ca.Function:
-        """Smooth step ``(state, s) -> (state_next, tau)`` with switching width ``eps`` (in s).
+        """Smooth step ``(state, u) -> (state_next, y)`` (u: s, y: τ) with switching width ``eps`` (in s).
 
         ``direction_eps`` (default ``eps``) is the width of the direction detection on the
         per-step change Δs. It must be well below the typical |Δs| per step, or steady
@@ -233,13 +234,9 @@ class PowerFunctionHysteresis(SteppedModel):
         kinks use ``smooth_max``; the transition's progress is clipped smoothly into
         ``(s02, s01)``; the Table VII set is blended by ``tanh(s0/eps)``.
         """
-        if not eps > 0 or (direction_eps is not None and not direction_eps > 0):
-            raise ValueError(f"eps and direction_eps must be > 0, got {eps}, {direction_eps}")
-        state = ca.SX.sym("state", 6)
-        s = ca.SX.sym("s")
-        nxt, tau = self.smooth_expressions(state, s, eps, direction_eps)
-        return ca.Function("power_function_smooth", [state, s], [nxt, tau], ["state", "s"],
-                           ["state_next", "tau"])
+        check_smoothing(eps, direction_eps)
+        return smooth_function("power_function_smooth", 6,
+                               lambda state, s: self.smooth_expressions(state, s, eps, direction_eps))
 
     def smooth_expressions(self, state, s, eps: float, direction_eps: float | None = None):
         """CasADi expressions of :meth:`smooth_step` (for embedding in larger models)."""

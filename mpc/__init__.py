@@ -1,18 +1,31 @@
 """Generic nonlinear MPC: nothing in this package knows about a particular actuator.
 
-* :class:`mpc.model.PredictionModel`: discrete-time nominal model ``x+ = F(x, u, d)``,
-  ``y = h(x, d)`` with a disturbance ``d`` held constant over the horizon (offset-free).
-* :class:`mpc.estimator.DisturbanceEKF`: extended Kalman filter on ``[x; d]``.
-* :class:`mpc.nmpc.Nmpc`: multiple-shooting tracking NLP (IPOPT by default).
-* :class:`mpc.controller.NmpcController`: estimator + NLP + warm starts + fallback.
-* :mod:`mpc.rti`: the real-time iteration step as one code-generatable Function;
-  :mod:`mpc.qp`: the interior-point QP it uses; :mod:`mpc.shooting`: single shooting.
+* :class:`NmpcController`: the sampled controller (observer, warm starts, solve, fallback)
+  for any prediction model of :mod:`hystmpc.models.prediction`.
+* :class:`NmpcSettings`, :class:`InputBounds`, :class:`SolverSettings`: what it is told.
+* :class:`MultipleShootingProblem`, :class:`SingleShootingProblem`: the tracking NLPs.
+* :class:`DisturbanceEKF`, :class:`StateObserver`, :class:`MemoryObserver`: estimation.
+* :mod:`hystmpc.mpc.rti`: the real-time iteration step as one code-generatable Function;
+  :mod:`hystmpc.mpc.qp`: the interior-point QP it uses.
 """
 
-from mpc.controller import NmpcController
-from mpc.estimator import DisturbanceEKF, OpenLoopEstimator
-from mpc.model import PredictionModel
-from mpc.nmpc import SOLVERS, Nmpc, NmpcSettings, NmpcStep
+from hystmpc.mpc.controller import NmpcController, default_observer
+from hystmpc.mpc.estimator import DisturbanceEKF
+from hystmpc.mpc.multiple_shooting import MultipleShootingProblem
+from hystmpc.mpc.observer import Estimate, MemoryObserver, StateObserver, memory_inverse
+from hystmpc.mpc.problem import Solution
+from hystmpc.mpc.settings import (
+    SOLVERS,
+    GaussNewtonSettings,
+    InputBounds,
+    NlpSettings,
+    NmpcSettings,
+    RtiSettings,
+    SolverSettings,
+)
+from hystmpc.mpc.single_shooting import SingleShootingProblem
 
-__all__ = ["SOLVERS", "DisturbanceEKF", "OpenLoopEstimator", "Nmpc", "NmpcController", "NmpcSettings", "NmpcStep",
-           "PredictionModel"]
+__all__ = ["SOLVERS", "DisturbanceEKF", "Estimate", "GaussNewtonSettings", "InputBounds", "MemoryObserver",
+           "MultipleShootingProblem", "NlpSettings", "NmpcController", "NmpcSettings",
+           "RtiSettings", "SingleShootingProblem", "Solution", "SolverSettings", "StateObserver",
+           "default_observer", "memory_inverse"]

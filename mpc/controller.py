@@ -1,63 +1,118 @@
-"""NMPC as a sampled controller: estimate, warm-start, solve, fall back when a solve fails."""
+"""The NMPC as a sampled controller: estimate, warm-start, solve, fall back when a solve fails.
+
+One loop for every prediction model: a :class:`~hystmpc.models.prediction.PredictionModel`
+gets the multiple-shooting problem, a
+:class:`~hystmpc.models.prediction.CreepPredictionModel` the single-shooting one; a
+state-driven model an EKF on all its states, an input-driven one the exact memory and an
+EKF on its dynamics (:mod:`hystmpc.mpc.observer`).
+"""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 
 import numpy as np
+from hystmpc.models.prediction import CreepPredictionModel, PredictionModel
+from hystmpc.mpc.estimator import DisturbanceEKF
+from hystmpc.mpc.multiple_shooting import MultipleShootingProblem
+from hystmpc.mpc.observer import Estimate, MemoryObserver, StateObserver, memory_inverse
+from hystmpc.mpc.problem import Solution, TrackingProblem
+from hystmpc.mpc.settings import InputBounds, NmpcSettings, SolverSettings
+from hystmpc.mpc.single_shooting import SingleShootingProblem
 
-from mpc.estimator import DisturbanceEKF
-from mpc.nmpc import Nmpc, NmpcSettings, NmpcStep
+Inverse = Callable[[Estimate, np.ndarray], np.ndarray]
+"""``(estimate, ref[N]) -> u[N]``: inputs that an inverse model says track ``ref``."""
 
-InverseFn = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
-"""``(x, d, ref[N]) -> u[N]``: inputs that the inverse model says track ``ref``."""
+
+def default_observer(model: PredictionModel | CreepPredictionModel, sensor_noise=None,
+                     creep_window: int | None = None):
+    """The observer a model gets when none is given: exact memory + an EKF on the dynamics for
+    an input-driven model, an EKF on every state otherwise; EKFs tuned from ``sensor_noise``
+    (:meth:`DisturbanceEKF.from_sensor_noise`)."""
+    memory = model.memory
+    if memory is not None and memory.dynamics is None:
+        return MemoryObserver(model, creep_window=creep_window)
+    if sensor_noise is None:
+        raise ValueError("the model has sensors: give sensor_noise (each sensor's standard deviation) "
+                         "or an observer")
+    if memory is not None:
+        ekf, p0 = DisturbanceEKF.from_sensor_noise(memory.dynamics, sensor_noise)
+        return MemoryObserver(model, ekf, initial_covariance=p0, creep_window=creep_window)
+    ekf, p0 = DisturbanceEKF.from_sensor_noise(model, sensor_noise)
+    return StateObserver(model, ekf, lambda z: np.zeros(model.nx), p0)
 
 
 class NmpcController:
-    """Offset-free NMPC loop around :class:`mpc.nmpc.Nmpc`.
+    """Offset-free NMPC loop.
 
-    Each sample: EKF time and measurement update, initial guess (inverse model at start-up,
-    after a reference jump enters the horizon and after a failure; shifted previous plan
-    otherwise), NLP solve; on failure the previous plan's next input (or, without one, the
-    inverse model's) is applied, clipped to the bounds, and the failure is counted.
+    Each sample: the observer's time and measurement update (restarted from the sensors if
+    the estimate is not finite); an initial guess (inverse model at start-up, after a
+    reference jump enters the horizon and after a failure; the shifted previous plan
+    otherwise); the solve; on failure the previous plan's next input (or, without one, the
+    inverse model's) is applied, and the failure is counted. The input sent is always
+    finite and inside ``bounds``.
 
     Parameters
     ----------
-    nmpc : Nmpc
-        The optimal control problem.
-    estimator : DisturbanceEKF
-        State and disturbance estimator on the same model.
-    initial_state : callable
-        ``z -> x0``: a state estimate from the first sensor vector.
-    inverse : callable
-        ``(x, d, ref) -> u``: inverse-model inputs over the horizon.
-    initial_covariance : array_like
-        Diagonal of the EKF's initial covariance on ``[x; d]``.
+    model : PredictionModel or CreepPredictionModel
+        The nominal prediction model (:func:`hystmpc.models.prediction.build_prediction_model`).
+    bounds : InputBounds
+        Input bounds and rate bound.
+    settings : NmpcSettings, optional
+        Horizon, weights, solver variant, preview, warm start (default: the defaults).
+    solvers : SolverSettings, optional
+        The solvers' own settings (default: the defaults).
+    observer : StateObserver or MemoryObserver, optional
+        Default: :func:`default_observer` with ``sensor_noise``.
+    inverse : callable, optional
+        ``(estimate, refs) -> u``; default for input-driven models:
+        :func:`hystmpc.mpc.observer.memory_inverse`. Needed for ``warm_start='inverse'``
+        and ``r_input > 0``.
+    sensor_noise : float or array_like, optional
+        Standard deviation of each sensor, for the default observer.
     jump_threshold : float
-        A reference change larger than this between samples counts as a jump.
+        A reference change larger than this between samples counts as a jump (default: never).
+    creep_window : int, optional
+        Past samples in the creep sums of a creep model's default observer (None: all).
     """
 
-    def __init__(self, nmpc: Nmpc, estimator: DisturbanceEKF, initial_state: Callable,
-                 inverse: InverseFn, initial_covariance, jump_threshold: float):
-        self.nmpc = nmpc
-        self.settings: NmpcSettings = nmpc.settings
-        self.estimator = estimator
-        self.initial_state = initial_state
+    def __init__(self, model: PredictionModel | CreepPredictionModel, bounds: InputBounds,
+                 settings: NmpcSettings | None = None, solvers: SolverSettings | None = None, *,
+                 observer=None, inverse: Inverse | None = None, sensor_noise=None,
+                 jump_threshold: float = np.inf, creep_window: int | None = None):
+        settings, solvers = settings or NmpcSettings(), solvers or SolverSettings()
+        self.model, self.bounds, self.settings, self.solvers = model, bounds, settings, solvers
+        if isinstance(model, CreepPredictionModel):
+            self.problem: TrackingProblem = SingleShootingProblem(model.horizon_function(settings.horizon),
+                                                                  settings, bounds, solvers)
+        else:
+            self.problem = MultipleShootingProblem(model, settings, bounds, solvers)
+        self.observer = observer if observer is not None else default_observer(model, sensor_noise, creep_window)
+        if inverse is None and model.memory is not None and model.memory.steady_input is not None:
+            inverse = memory_inverse(model.memory, model.sample_period)
+        if inverse is None and (settings.warm_start == "inverse" or settings.r_input > 0):
+            raise ValueError("nmpc.warm_start=inverse and nmpc.r_input > 0 need an inverse model: give one "
+                             "(or dynamics with steady_input), or use nmpc.warm_start=shift and r_input=0")
         self.inverse = inverse
-        self.initial_covariance = np.asarray(initial_covariance, float)
         self.jump_threshold = float(jump_threshold)
         self.reset()
 
     @property
     def horizon(self) -> int:
-        """Prediction horizon in samples."""
+        """Prediction horizon in samples (the reference preview this controller asks for)."""
         return self.settings.horizon
+
+    @property
+    def sensor_names(self) -> tuple[str, ...]:
+        """Measured signals the controller reads (``y``: the tracked output)."""
+        return self.model.sensor_names
 
     def reset(self) -> None:
         """Forget estimate, plan and counters."""
+        self.observer.reset()
         self._started = False
         self._u_last = 0.0
-        self._plan: NmpcStep | None = None
+        self._plan: Solution | None = None
         self._last_ref_end = None
         self.failures = 0
         self.fallbacks = 0
@@ -68,43 +123,40 @@ class NmpcController:
         self.statuses: dict[str, int] = {}
         self.predicted_output = float("nan")
 
-    def step(self, z, ref_window) -> float:
-        """One sample: sensor vector ``z`` and references ``r_k..r_{k+N}`` in, input out."""
+    def sensors(self, measurement) -> np.ndarray:
+        """The sensor vector ``z`` of a plant's measurement."""
+        return np.array([measurement.y if name == "y" else measurement.sensors[name]
+                         for name in self.sensor_names], float)
+
+    def step(self, measurement, ref_window) -> float:
+        """One sample: a measurement and the references ``r_k..r_{k+N}`` in, the input out."""
         N = self.horizon
         ref_window = np.asarray(ref_window, float).ravel()
         if len(ref_window) != N + 1:
             raise ValueError(f"ref_window needs {N + 1} samples, got {len(ref_window)}")
         if not self.settings.preview:
             ref_window = np.full(N + 1, ref_window[0])
-        est = self.estimator
-        if not self._started:
-            x0 = np.asarray(self.initial_state(z), float)
-            est.reset(x0, np.zeros(self.nmpc.model.nd), self.initial_covariance)
-        else:
-            est.predict([self._u_last])
-        self.predicted_output = float(self.nmpc.model.output(est.x, est.d))
-        est.update(z)
-        if not (np.all(np.isfinite(est.x)) and np.all(np.isfinite(est.d))):
-            self.estimator_resets += 1  # never plan from a NaN estimate: start it again
-            est.reset(np.asarray(self.initial_state(z), float), np.zeros(self.nmpc.model.nd),
-                      self.initial_covariance)
+        if self.observer.update(self.sensors(measurement), self._u_last if self._started else None):
+            self.estimator_resets += 1  # never plan from a NaN estimate: it started again
             self._plan = None
-        x, d = est.x, est.d
+        self.predicted_output = self.observer.predicted_output
+        est = self.observer.estimate(N)
         refs = ref_window[1:]
         cache = []
 
         def u_inv():  # the inverse model is only needed for warm starts, fallbacks and r_input
             if not cache:
-                cache.append(np.clip(np.asarray(self.inverse(x, d, refs), float).ravel(),
-                                     self.nmpc.u_min, self.nmpc.u_max))
+                u = np.asarray(self.inverse(est, refs), float).ravel()
+                u = np.where(np.isfinite(u), u, self._u_last)
+                cache.append(np.clip(u, self.bounds.lower, self.bounds.upper))
             return cache[0]
 
         jump = (self._last_ref_end is not None
                 and abs(refs[-1] - self._last_ref_end) > self.jump_threshold)
         self._last_ref_end = refs[-1]
-        u_guess, x_guess = self._initial_guess(u_inv, jump, x, d)
+        u_guess, x_guess = self._initial_guess(u_inv, jump, est)
         u_ff = u_inv() if self.settings.r_input > 0 else np.zeros(N)  # zero weight: value unused
-        result = self.nmpc.solve(x, d, self._u_last, refs, u_guess, x_guess, u_ff=u_ff)
+        result = self.problem.solve(self.observer.condition(est), self._u_last, refs, u_guess, x_guess, u_ff=u_ff)
         self.iterations.append(result.iterations)
         self.solve_times.append(result.solve_time)
         self.statuses[result.status] = self.statuses.get(result.status, 0) + 1
@@ -116,18 +168,19 @@ class NmpcController:
             self.fallbacks += 1
             if self._plan is not None:
                 u = float(self._plan.u_plan[min(1, N - 1), 0])
-            else:
+            elif self.inverse is not None:
                 u = float(u_inv()[0])
+            else:
+                u = self._u_last
             self._plan = None
         if not np.isfinite(u):  # never send NaN to an actuator
-            u = float(u_inv()[0]) if np.isfinite(u_inv()[0]) else self._u_last
-        u = float(np.clip(u, self._u_last - self.nmpc.du_max, self._u_last + self.nmpc.du_max))
-        u = float(np.clip(u, self.nmpc.u_min, self.nmpc.u_max))
+            u = float(u_inv()[0]) if self.inverse is not None and np.isfinite(u_inv()[0]) else self._u_last
+        u = self.bounds.clip(u, self._u_last)
         self._u_last = u
         self._started = True
         return u
 
-    def _initial_guess(self, u_inv, jump, x, d):
+    def _initial_guess(self, u_inv, jump: bool, est: Estimate):
         mode = self.settings.warm_start
         N = self.horizon
         if mode == "cold":
@@ -140,12 +193,12 @@ class NmpcController:
             return np.full(N, self._u_last), None
         u_prev = self._plan.u_plan[:, 0]
         u_guess = np.concatenate((u_prev[1:], u_prev[-1:]))
-        if getattr(self.nmpc, "condensed", False):  # the condensed RTI step rolls out the states itself
-            return u_guess, None
+        if not self.problem.multiple_shooting or getattr(self.problem, "condensed", False):
+            return u_guess, None  # only the inputs are unknowns (or the step rolls out the states itself)
         x_prev = self._plan.x_plan
-        x_tail = np.asarray(self.nmpc.model.step(x_prev[-1], u_prev[-1], d)).ravel()
+        x_tail = np.asarray(self.model.step(x_prev[-1], u_prev[-1], est.d)).ravel()
         x_guess = np.vstack((x_prev[1:], x_tail))
-        x_guess[0] = x
+        x_guess[0] = est.x
         return u_guess, x_guess
 
     def stats(self) -> dict:

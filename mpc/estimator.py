@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import casadi as ca
 import numpy as np
-
-from mpc.model import PredictionModel
+from hystmpc.models.prediction import PredictionModel
 
 
 class DisturbanceEKF:
@@ -68,32 +67,28 @@ class DisturbanceEKF:
         self.P = I_KC @ self.P @ I_KC.T + K @ self.R @ K.T  # Joseph form: stays symmetric PSD
         self.x, self.d = z[: self.model.nx], z[self.model.nx:]
 
+    @classmethod
+    def from_sensor_noise(cls, model: PredictionModel, sensor_noise) -> tuple[DisturbanceEKF, np.ndarray]:
+        """An EKF tuned from the sensors' noise alone, and its initial covariance.
 
-class OpenLoopEstimator:
-    """For feed-forward control (no sensor): the state follows a model under the applied inputs.
+        With ``σ`` the smallest sensor noise standard deviation: measurement noise ``σ_i²``;
+        the disturbance a random walk of ``σ`` per sample (it follows a model mismatch that
+        changes over tens of samples); the states' process noise ``(0.01 σ)²`` (the model is
+        trusted, its errors land in ``d``); initial covariance ``(10 σ)²`` on the states and
+        ``(1000 σ)²`` on ``d``.
 
-    Parameters
-    ----------
-    step : callable
-        ``(x, u) -> x_next``, typically the *exact* model, so the NMPC re-anchors its smooth
-        prediction on the exact memory every sample.
-    nd : int
-        Size of the (always zero) disturbance vector the NMPC expects.
-    """
+        Parameters
+        ----------
+        model : PredictionModel
+            The model the EKF runs.
+        sensor_noise : float or array_like
+            Standard deviation of each sensor (one value: every sensor), > 0.
+        """
+        noise = np.broadcast_to(np.asarray(sensor_noise, float), (model.nz,)).copy()
+        if not np.all(np.isfinite(noise)) or np.any(noise <= 0):
+            raise ValueError(f"sensor_noise must be finite and > 0, got {sensor_noise}")
+        sigma = float(noise.min())
+        process = [(0.01 * sigma) ** 2] * model.nx + [sigma**2] * model.nd
+        initial = [(10 * sigma) ** 2] * model.nx + [(1000 * sigma) ** 2] * model.nd
+        return cls(model, process, noise**2), np.asarray(initial)
 
-    def __init__(self, step, nd: int = 1):
-        self._step = step
-        self.x = np.zeros(0)
-        self.d = np.zeros(nd)
-
-    def reset(self, x0, d0, P0=None) -> None:
-        """Set the state; the disturbance stays zero (nothing measures it)."""
-        self.x = np.asarray(x0, float).copy()
-        self.d = np.zeros_like(np.asarray(d0, float))
-
-    def predict(self, u) -> None:
-        """Propagate with the applied input."""
-        self.x = np.asarray(self._step(self.x, float(np.ravel(u)[0])), float)
-
-    def update(self, z) -> None:
-        """No measurement: nothing to do."""

@@ -1,6 +1,6 @@
 """Real-time iteration: one Gauss–Newton SQP step per sample, as a single CasADi Function.
 
-The tracking cost of :class:`mpc.nmpc.Nmpc` is a sum of squares, ``Σ ‖r(w, p)‖²``, so the
+The tracking cost of :mod:`hystmpc.mpc.problem` is a sum of squares, ``Σ ‖r(w, p)‖²``, so the
 Gauss–Newton Hessian ``JᵀJ`` is positive semidefinite and needs no convexification. One
 step linearises the shooting and rate constraints at the warm start ``w``, solves the QP
 with qrqp (self-contained C99 when generated), and returns ``w + Δw``. Wrapped as one
@@ -42,7 +42,7 @@ def rti_function(residual: ca.Function, constraints: ca.Function, lbg, ubg, lbx,
         linear constraints, not multiple shooting.
     qp : {"qrqp", "ipm"}
         ``qrqp``: CasADi's active-set solver (any bounds; wrong on some problems with
-        inequality rows, see :mod:`mpc.qp`). ``ipm``: :func:`mpc.qp.interior_point_qp`
+        inequality rows, see :mod:`hystmpc.mpc.qp`). ``ipm``: :func:`hystmpc.mpc.qp.interior_point_qp`
         with ``qp_iterations`` iterations (all bounds finite).
 
     The second output, ``qp_error``, says how far the QP answer is from trustworthy: for
@@ -72,7 +72,7 @@ def rti_function(residual: ca.Function, constraints: ca.Function, lbg, ubg, lbx,
     if qp == "ipm":
         if not (np.all(np.isfinite(lower)) and np.all(np.isfinite(upper)) and np.all(lower < upper)):
             raise ValueError("qp 'ipm' needs finite bounds with lower < upper on every variable and constraint")
-        from mpc.qp import interior_point_qp
+        from hystmpc.mpc.qp import interior_point_qp
         solver = interior_point_qp(H.sparsity(), C.sparsity(), qp_iterations)
         step, qp_error, _ = solver(H_mx, grad, C, l_mx, u_mx)
     else:

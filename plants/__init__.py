@@ -1,13 +1,18 @@
-"""Simulated actuators (the truth the controllers never see directly).
+"""Simulated actuators (the truth the controllers never see directly), and each actuator's
+prediction model beside its physics.
 
-Every plant has ``reset(seed) -> Measurement`` and ``step(u) -> Measurement`` and runs the
-exact, non-smooth hysteresis with its own (deliberately off-nominal) parameters.
+Every plant follows :class:`Plant`: ``reset(seed) -> Measurement``, ``step(u) ->
+Measurement`` and ``sample_period``; it runs the exact, non-smooth hysteresis with its own
+(deliberately off-nominal) parameters. :class:`HysteresisActuator` builds one from any
+hysteresis model and dynamics.
 """
 
-from plants.base import Measurement
-from plants.compliant import CompliantActuator, CompliantParams
-from plants.pam_joint import PamJoint, PamJointParams
-from plants.reluctance import ReluctanceActuator, ReluctanceParams
+from hystmpc.plants.actuator import HysteresisActuator
+from hystmpc.plants.base import Measurement, Plant
+from hystmpc.plants.compliant import CompliantActuator, CompliantParams
+from hystmpc.plants.dea import DeaActuator, DeaParams
+from hystmpc.plants.pam_joint import PamJoint, PamJointParams
+from hystmpc.plants.reluctance import ReluctanceActuator, ReluctanceParams
 
-__all__ = ["CompliantActuator", "CompliantParams", "Measurement", "PamJoint", "PamJointParams",
-           "ReluctanceActuator", "ReluctanceParams"]
+__all__ = ["CompliantActuator", "CompliantParams", "DeaActuator", "DeaParams", "HysteresisActuator", "Measurement",
+           "PamJoint", "PamJointParams", "Plant", "ReluctanceActuator", "ReluctanceParams"]

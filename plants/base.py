@@ -1,8 +1,9 @@
-"""What every plant returns each sample."""
+"""What every plant is and returns: :class:`Plant` and :class:`Measurement`."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
 
 
 @dataclass
@@ -17,3 +18,18 @@ class Measurement:
     """Other measured signals a controller may use (e.g. ``pressure``)."""
     truth: dict[str, float] = field(default_factory=dict)
     """True internal signals for plots and diagnostics; controllers must not read these."""
+
+
+@runtime_checkable
+class Plant(Protocol):
+    """A simulated actuator (the truth): reset, then one input per sample."""
+
+    @property
+    def sample_period(self) -> float:
+        """Sample period (s)."""
+
+    def reset(self, seed: int) -> Measurement:
+        """Back to rest, sensor noise seeded with ``seed``; the first measurement."""
+
+    def step(self, u: float) -> Measurement:
+        """Apply ``u`` for one sample; the measurement at the end of it."""

@@ -17,10 +17,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import casadi as ca
 import numpy as np
-
-from models.power_function import PowerFunctionHysteresis, VirtualDeformation
-from plants.base import Measurement
+from hystmpc.models.power_function import PowerFunctionHysteresis, VirtualDeformation
+from hystmpc.models.prediction import Dynamics, PredictionModel, build_prediction_model
+from hystmpc.plants.base import Measurement
 
 
 @dataclass(frozen=True)
@@ -122,3 +123,44 @@ class CompliantActuator:
             sensors={"angle": float(np.round(self._motor / quantum) * quantum)},
             truth={"torque": tau, "angle": self._theta, "s": float(self._hys[0])},
         )
+
+
+def servo_rhs(p: CompliantParams, x, theta_cmd) -> list:
+    """Time derivative of ``x = [θ1, θ1']`` under the position loop, without the rate limit."""
+    return [x[1], p.servo_wn**2 * (theta_cmd - x[0]) - 2 * p.servo_zeta * p.servo_wn * x[1]]
+
+
+def prediction_model(p: CompliantParams, eps: float, substeps: int = 2,
+                     direction_eps: float | None = None) -> PredictionModel:
+    """Smooth model ``x = [θ1, θ1', s_last, up, s01, s02, τ_r, τ, q_1..q_D]``, d = torque offset.
+
+    The servo (no backlash, no rate limit) moves θ1; the power-function hysteresis follows
+    s(θ1), eq. (8); ``q`` is the command delay line (``p.command_delay`` samples). Sensors:
+    motor angle and torque.
+    """
+    dynamics = Dynamics(
+        state_names=("angle", "rate"), rhs=lambda x, u, h, d: servo_rhs(p, x, u),
+        hysteresis_input=lambda x, u: p.geometry.s(x[0], xp=ca),
+        sensor_names=("angle", "y"), measure=lambda x, h, y: [x[0], y])
+    return build_prediction_model(p.hysteresis, p.sample_period, dynamics=dynamics, eps=eps,
+                                  direction_eps=direction_eps, disturbance="output",
+                                  delay_samples=p.command_delay, substeps=substeps, name="compliant")
+
+
+def inverse_inputs(p: CompliantParams, x, d, refs) -> np.ndarray:
+    """Motor angles that the inverse model gives for ``refs − d`` from the state ``x`` of
+    :func:`prediction_model`."""
+    hys: PowerFunctionHysteresis = p.hysteresis
+    state = np.asarray(x[2:8], float).copy()
+    state[1] = 1.0 if state[1] >= 0.5 else 0.0
+    out = np.empty(len(refs))
+    for j, r in enumerate(refs):
+        state, s = hys.inverse_step(state, float(r) - float(d[0]))
+        out[j] = float(p.geometry.theta(s))
+    return np.clip(out, -p.angle_limit, p.angle_limit)
+
+
+def initial_state(p: CompliantParams, z) -> np.ndarray:
+    """Model state at rest from the first sensor vector ``[motor angle, torque]``."""
+    s = float(p.geometry.s(z[0]))
+    return np.concatenate(([z[0], 0.0], p.hysteresis.initial_state(s), np.full(p.command_delay, z[0])))

@@ -17,10 +17,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import casadi as ca
 import numpy as np
-
-from models.fckp import Fckp, FckpParams
-from plants.base import Measurement
+from hystmpc.models.fckp import Fckp, FckpParams
+from hystmpc.models.integrators import rk4
+from hystmpc.models.prediction import CreepPredictionModel, Dynamics, build_prediction_model
+from hystmpc.plants.base import Measurement
 
 
 @dataclass(frozen=True)
@@ -73,6 +75,31 @@ class DeaParams:
         return self.natural_frequency**2 * (1 + self.gain_variation * tanh(x1 / 2.0))
 
 
+def mechanics_rhs(p: DeaParams, x, w, extra_acceleration, tanh=np.tanh) -> list:
+    """Time derivative of ``x = [x1, x2]`` (mm, mm/s) driven by the FCKP output ``w`` (mm)."""
+    return [x[1], p.f(x[0], x[1]) + p.g(x[0], tanh=tanh) * w + extra_acceleration]
+
+
+def steady_output_input(p: DeaParams, y):
+    """The FCKP output W that holds the displacement at ``y`` at rest: ``f(y, 0) + g(y) W = 0``."""
+    y = np.asarray(y, float)
+    return (y + p.stiffening * y**3) / (1 + p.gain_variation * np.tanh(y / 2.0))
+
+
+def prediction_model(p: DeaParams, eps: float, direction_eps: float | None = None) -> CreepPredictionModel:
+    """The NMPC's model: smooth FCKP in volts, the GL creep integral, the nominal mechanics.
+
+    ``d`` adds to the FCKP output W (an input disturbance); the sensor is the laser. The
+    creep history is a parameter of the horizon prediction (design/nmpc.md).
+    """
+    dynamics = Dynamics(state_names=("displacement", "velocity"),
+                        rhs=lambda x, u, h, d: mechanics_rhs(p, x, h, d, tanh=ca.tanh),
+                        output=lambda x, h: x[0], steady_input=lambda y: steady_output_input(p, y))
+    return build_prediction_model(Fckp(p.fckp), p.sample_period, dynamics=dynamics, eps=eps,
+                                  direction_eps=direction_eps, disturbance="hysteresis",
+                                  creep_order=p.fckp.creep_order, name="dea")
+
+
 def disturbance(t, amplitude: float, omega: float):
     """d(t): two slow sines, bounded by 1.5 ω² · amplitude (mm/s²)."""
     return amplitude * omega**2 * (np.sin(2 * np.pi * 0.07 * t) + 0.5 * np.sin(2 * np.pi * 0.31 * t + 1.0))
@@ -104,28 +131,18 @@ class DeaActuator:
         self._t = 0.0
         return self._measure()
 
-    def _rhs(self, x, t):
-        p = self.params
-        d = disturbance(t, p.disturbance, p.natural_frequency)
-        return np.array([x[1], p.f(x[0], x[1]) + p.g(x[0]) * self._W + d])
-
     def step(self, u: float) -> Measurement:
         """Apply the voltage command ``u`` (V) for one sample."""
         if not np.isfinite(u):
             raise ValueError(f"plant input must be finite, got {u}")
         p = self.params
         self._u = float(np.clip(u, 0.0, p.fckp.u_max))
-        self._kp, self._W = self.model.step(self._kp, self._creep, self._u)
-        h = p.sample_period / p.substeps
-        x, t = self._x, self._t
-        for _ in range(p.substeps):
-            k1 = self._rhs(x, t)
-            k2 = self._rhs(x + 0.5 * h * k1, t + 0.5 * h)
-            k3 = self._rhs(x + 0.5 * h * k2, t + 0.5 * h)
-            k4 = self._rhs(x + h * k3, t + h)
-            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-            t += h
-        self._x, self._t = x, self._t + p.sample_period
+        self._kp, self._W = self.model.creep_step(self._kp, self._creep, self._u)
+
+        def rhs(x, t):
+            return np.array(mechanics_rhs(p, x, self._W, disturbance(t, p.disturbance, p.natural_frequency)))
+        self._x = rk4(rhs, self._x, p.sample_period / p.substeps, p.substeps, self._t)
+        self._t = self._t + p.sample_period
         return self._measure()
 
     def _measure(self) -> Measurement:

@@ -18,10 +18,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
+import casadi as ca
 import numpy as np
-
-from models.maxwell_slip import MaxwellSlip
-from plants.base import Measurement
+from hystmpc.models.integrators import rk4
+from hystmpc.models.maxwell_slip import MaxwellSlip
+from hystmpc.models.prediction import Dynamics, PredictionModel, build_prediction_model
+from hystmpc.plants.base import Measurement
 
 GRAVITY = 9.81
 DEG = np.pi / 180.0
@@ -140,6 +142,53 @@ def joint_acceleration(p: PamJointParams, theta_deg, omega_deg, dp, dp_hys, extr
     return torque / p.inertia / DEG
 
 
+def joint_rhs(p: PamJointParams, x, dp_cmd, dp_hys, extra_torque, xp=np) -> list:
+    """Time derivative of ``x = [θ, ω, Δp, Δp']`` (deg, deg/s, bar, bar/s) for the plant and
+    the NMPC's model alike (see module docstring; the slew limit is the plant's own)."""
+    theta, omega, dp, ddp = x[0], x[1], x[2], x[3]
+    acc = joint_acceleration(p, theta, omega, dp, dp_hys, extra_torque, xp)
+    dd = p.pressure_wn**2 * (dp_cmd - dp - p.volume_coupling * omega) - 2 * p.pressure_zeta * p.pressure_wn * ddp
+    return [omega, acc, ddp, dd]
+
+
+def prediction_model(p: PamJointParams, eps: float, direction_eps: float | None = None,
+                     substeps: int = 2) -> PredictionModel:
+    """Smooth discrete-time model of the joint for the NMPC and its EKF.
+
+    ``x = [θ, ω, Δp, Δp', F_1..F_M, q_1..q_D]``, ``d`` = an unknown torque (N m, where the
+    plant's creep acts), sensors: angle and pressure. The Maxwell-slip elements move with θ
+    relative to the sample's start (their last input *is* θ), so a monotone θ within a
+    sample gives the exact update up to eps; the command passes the ``D``-sample delay line.
+    Maxwell-slip has no direction detection: ``direction_eps`` must stay None.
+    """
+    dynamics = Dynamics(
+        state_names=("angle", "rate", "pressure", "pressure_rate"),
+        rhs=lambda x, u, h, d: joint_rhs(p, x, u, h, d, xp=ca),
+        output=lambda x, h: x[0], hysteresis_input=lambda x, u: x[0], shares_last_input=True,
+        sensor_names=("y", "pressure"), measure=lambda x, h, y: [y, x[2]])
+    return build_prediction_model(p.hysteresis, p.sample_period, dynamics=dynamics, eps=eps,
+                                  direction_eps=direction_eps, disturbance="dynamics",
+                                  delay_samples=p.delay_samples, substeps=substeps, name="pam")
+
+
+def inverse_inputs(p: PamJointParams, x, d, refs) -> np.ndarray:
+    """Static inverse along the reference: Δp_cons(r) + Δp_hys(path) − d/a(r), eqs. (2)–(3),
+    from the state ``x`` of :func:`prediction_model`.
+
+    The command reaches the pressure ``D`` samples later, so input ``j`` aims at ``r_{j+D}``.
+    """
+    D, M = p.delay_samples, p.hysteresis.n_elements
+    refs = np.asarray(refs, float)
+    n = len(refs)
+    hys = np.concatenate(([x[0]], np.clip(x[4: 4 + M], -np.asarray(p.hysteresis.w), np.asarray(p.hysteresis.w))))
+    need = np.empty(n)
+    for j in range(n):
+        r = refs[min(j + D, n - 1)]
+        hys, dp_hys = p.hysteresis.step(hys, r)
+        need[j] = constraint_pressure(p, r) + dp_hys - float(d[0]) / torque_slope(p, r)
+    return need
+
+
 @dataclass
 class PamJoint:
     """Simulated antagonistic PAM joint; input: commanded Δp (bar); output: angle (deg)."""
@@ -168,13 +217,6 @@ class PamJoint:
         p = self.params
         return -p.creep_torque * (1.0 - np.exp(-t / p.creep_time))
 
-    def _rhs(self, x, dp_cmd, dp_hys, t):
-        p = self.params
-        theta, omega, dp, ddp = x
-        acc = joint_acceleration(p, theta, omega, dp, dp_hys, self._creep(t))
-        dd = p.pressure_wn**2 * (dp_cmd - dp - p.volume_coupling * omega) - 2 * p.pressure_zeta * p.pressure_wn * ddp
-        return np.array([omega, acc, ddp, dd])
-
     def step(self, u: float) -> Measurement:
         """Apply the commanded pressure difference ``u`` (bar) for one sample."""
         if not np.isfinite(u):
@@ -186,15 +228,11 @@ class PamJoint:
         h = p.sample_period / p.substeps
         for _ in range(p.substeps):
             dp_hys = p.hysteresis.output(self._hys)
-            x, t = self._x, self._t
-            k1 = self._rhs(x, dp_cmd, dp_hys, t)
-            k2 = self._rhs(x + h / 2 * k1, dp_cmd, dp_hys, t + h / 2)
-            k3 = self._rhs(x + h / 2 * k2, dp_cmd, dp_hys, t + h / 2)
-            k4 = self._rhs(x + h * k3, dp_cmd, dp_hys, t + h)
-            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            x = rk4(lambda x, t, dp_hys=dp_hys: np.array(joint_rhs(p, x, dp_cmd, dp_hys, self._creep(t))), self._x, h,
+                    t=self._t)
             x[3] = np.clip(x[3], -p.pressure_slew, p.pressure_slew)
             self._x = x
-            self._t = t + h
+            self._t = self._t + h
             self._hys, _ = p.hysteresis.step(self._hys, x[0])
         return self._measure()
 

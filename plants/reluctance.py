@@ -18,9 +18,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-
-from models.parametric import ParametricHysteresis
-from plants.base import Measurement
+from hystmpc.models.parametric import ParametricHysteresis
+from hystmpc.plants.base import Measurement
 
 MU0 = 4e-7 * np.pi
 

@@ -2,8 +2,7 @@
 
 import numpy as np
 import pytest
-
-from models.maxwell_slip import MaxwellSlip
+from hystmpc.models.maxwell_slip import MaxwellSlip
 
 
 @pytest.fixture

@@ -5,9 +5,8 @@ import subprocess
 import sys
 
 import pytest
-
-from experiments.cli import main
-from experiments.report import validate_document
+from hystmpc.experiments.cli import main
+from hystmpc.experiments.report import validate_document
 
 
 def _run(capsys, argv):
@@ -30,7 +29,15 @@ def _csv(tmp_path, text, name="ref.csv"):
      "unknown bench 'nosuch'; allowed: pam, compliant, reluctance"),
     (["compare", "pam", "--controllers", "pi,lqr"], "unknown controller 'lqr'"),
     (["run", "pam", "square-10", "--controller", "pi", "--set", "nmpc.nosuch=3"],
-     "unknown --set key 'nmpc.nosuch'; allowed: plant.payload_kg"),
+     "unknown --set key 'nmpc.nosuch'; keys of group nmpc: horizon, q_output"),
+    (["run", "pam", "square-10", "--controller", "pi", "--set", "nmpc.horizn=3"],
+     "unknown --set key 'nmpc.horizn'; did you mean 'nmpc.horizon'?"),
+    (["run", "pam", "square-10", "--controller", "pi", "--set", "nmpc.eps=1e-4"],
+     "--set nmpc.eps is now smoothing.eps"),
+    (["run", "pam", "square-10", "--controller", "pi", "--set", "model.creep_time=3"],
+     "--set model.creep_time cannot be changed on this bench: the controllers' model has no creep"),
+    (["run", "pam", "square-10", "--controller", "nmpc", "--set", "smoothing.direction_eps=1e-4"],
+     "direction_eps does not apply"),
     (["run", "pam", "square-10", "--controller", "pi", "--set", "nmpc.horizon=abc"],
      "--set nmpc.horizon='abc': expected an integer"),
     (["run", "pam", "square-10", "--controller", "pi", "--set", "nmpc.horizon=1"], "horizon must be >= 2"),
@@ -122,7 +129,7 @@ def test_scenario_conditions_cannot_be_overridden(capsys):
 
 
 def test_module_entry_point_exit_code():
-    proc = subprocess.run([sys.executable, "-m", "experiments", "run", "pam", "nosuch", "--controller", "nmpc"],
+    proc = subprocess.run([sys.executable, "-m", "hystmpc.experiments", "run", "pam", "nosuch", "--controller", "nmpc"],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == [

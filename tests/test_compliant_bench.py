@@ -5,12 +5,10 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-
-from experiments.benches.compliant import BENCH, NOMINAL, PAPER_TABLE_IV, PLANT
-from experiments.cli import main
-from experiments.report import validate_document
-from experiments.runner import simulate
-from plants.compliant import CompliantActuator
+from hystmpc.experiments.benches.compliant import BENCH, NOMINAL, PAPER_TABLE_IV, PLANT
+from hystmpc.experiments.cli import main
+from hystmpc.experiments.report import validate_document
+from hystmpc.plants.compliant import CompliantActuator
 
 
 def test_plant_starts_at_zero_torque_and_quantises_like_the_sensor():
@@ -39,20 +37,20 @@ def test_command_delay_and_backlash_are_invisible_to_the_encoder():
 
 def test_calibration_against_table_iv():
     """inverse-ff-pid within a factor of 3 of zhou2024 Table IV, and better than plain PID."""
-    config = BENCH.defaults()
+    config = BENCH.configure()
     for amplitude, (paper_rmse, _) in PAPER_TABLE_IV.items():
         scenario = BENCH.scenarios[f"sine-{amplitude:g}"]
-        ff = simulate(BENCH, scenario, "inverse-ff-pid", config).metrics["rmse"]
-        pid = simulate(BENCH, scenario, "pid", config).metrics["rmse"]
+        ff = BENCH.run(scenario, "inverse-ff-pid", config).metrics["rmse"]
+        pid = BENCH.run(scenario, "pid", config).metrics["rmse"]
         assert paper_rmse / 3 <= ff <= 3 * paper_rmse, (amplitude, ff)
         assert ff < pid, (amplitude, ff, pid)
 
 
 def test_nmpc_short_closed_loop():
-    config = BENCH.defaults()
+    config = BENCH.configure()
     scenario = BENCH.scenarios["sine-1"]
-    nmpc = simulate(BENCH, scenario, "nmpc", config, duration=4.0)
-    ff = simulate(BENCH, scenario, "inverse-ff-pid", config, duration=4.0)
+    nmpc = BENCH.run(scenario, "nmpc", config, duration=4.0)
+    ff = BENCH.run(scenario, "inverse-ff-pid", config, duration=4.0)
     assert nmpc.solver["failures"] == 0
     assert np.all(np.isfinite(nmpc.input)) and np.all(np.abs(nmpc.input) <= NOMINAL.angle_limit)
     assert np.max(np.abs(np.diff(nmpc.input))) <= NOMINAL.rate_limit * NOMINAL.sample_period + 1e-12

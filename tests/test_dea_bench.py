@@ -4,11 +4,9 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-
-from experiments.benches.dea import BENCH, NOMINAL, PAPER_TABLE_2, prediction_function
-from experiments.runner import simulate
-from models.fckp import Fckp
-from plants.dea import DeaActuator
+from hystmpc.experiments.benches.dea import BENCH, NOMINAL, PAPER_TABLE_2
+from hystmpc.models.fckp import Fckp
+from hystmpc.plants.dea import DeaActuator, prediction_model
 
 
 def test_constant_voltage_creeps_upwards_and_settles_near_w():
@@ -30,7 +28,7 @@ def test_prediction_with_history_terms_matches_the_exact_model():
     the exact nominal model with full creep memory over the horizon."""
     model = replace(NOMINAL, noise=0.0, disturbance=0.0)
     N = 15
-    predict = prediction_function(model, N, eps=1e-4, direction_eps=1e-5)
+    predict = prediction_model(model, eps=1e-4, direction_eps=1e-5).horizon_function(N)
     plant = DeaActuator(model)
     plant.reset(0)
     t = 0.01 * np.arange(400 + N)
@@ -46,22 +44,22 @@ def test_prediction_with_history_terms_matches_the_exact_model():
 
 @pytest.mark.parametrize("controller", ["pid", "backstepping", "bic", "linear-mpc", "nmpc"])
 def test_every_controller_runs_within_the_input_range(controller):
-    run = simulate(BENCH, BENCH.scenarios["single-sine"], controller, BENCH.defaults(), duration=3.0)
+    run = BENCH.run(BENCH.scenarios["single-sine"], controller, BENCH.configure(), duration=3.0)
     assert np.all(np.isfinite(run.input)) and np.all(np.isfinite(run.output))
     assert run.input.min() >= 0.0 and run.input.max() <= 10.0
 
 
 def test_nmpc_beats_pid_without_failures_on_a_short_run():
-    config = BENCH.defaults()
-    nmpc = simulate(BENCH, BENCH.scenarios["single-sine"], "nmpc", config, duration=4.0)
-    pid = simulate(BENCH, BENCH.scenarios["single-sine"], "pid", config, duration=4.0)
+    config = BENCH.configure()
+    nmpc = BENCH.run(BENCH.scenarios["single-sine"], "nmpc", config, duration=4.0)
+    pid = BENCH.run(BENCH.scenarios["single-sine"], "pid", config, duration=4.0)
     assert nmpc.solver["failures"] == 0
     assert nmpc.metrics["rmse"] < 0.2 * pid.metrics["rmse"]
 
 
 def test_window_changes_only_the_controllers_memory():
-    config = BENCH.defaults()
-    from experiments.config import apply_overrides
+    config = BENCH.configure()
+    from hystmpc.experiments.config import apply_overrides
     short = apply_overrides(config, ["memory.window=50"])
     assert short["memory"].length == 50 and config["memory"].length is None
     with pytest.raises(ValueError, match="window"):
@@ -72,11 +70,11 @@ def test_window_changes_only_the_controllers_memory():
 @pytest.mark.slow
 def test_full_comparison_orderings_and_nmpc():
     """Issue 5, items 2–3 as far as they hold (see docs/dea.md for the calibration gap)."""
-    config = BENCH.defaults()
+    config = BENCH.configure()
     rmse = {}
     for scenario in BENCH.scenarios:
         for controller in BENCH.controllers:
-            run = simulate(BENCH, BENCH.scenarios[scenario], controller, config)
+            run = BENCH.run(BENCH.scenarios[scenario], controller, config)
             assert np.all(np.isfinite(run.input)) and np.all(np.isfinite(run.output))
             if controller == "nmpc":
                 assert run.solver["fallbacks"] == 0, scenario
@@ -94,9 +92,9 @@ def test_full_comparison_orderings_and_nmpc():
 def test_the_plants_creep_causes_almost_none_of_bics_error_on_composite():
     """Why Table 3 (creep compensation: 0.0235 -> 0.0133 mm) cannot be reproduced: even a
     creep-free plant leaves bic's RMSE within a few per cent of what it is with creep."""
-    from experiments.config import apply_overrides
-    config = BENCH.defaults()
-    with_creep = simulate(BENCH, BENCH.scenarios["composite"], "bic", config).metrics["rmse"]
+    from hystmpc.experiments.config import apply_overrides
+    config = BENCH.configure()
+    with_creep = BENCH.run(BENCH.scenarios["composite"], "bic", config).metrics["rmse"]
     creep_free = apply_overrides(config, ["plant.fckp.creep_order=0"])
-    without_creep = simulate(BENCH, BENCH.scenarios["composite"], "bic", creep_free).metrics["rmse"]
+    without_creep = BENCH.run(BENCH.scenarios["composite"], "bic", creep_free).metrics["rmse"]
     assert abs(with_creep - without_creep) < 0.05 * with_creep  # Table 3 is a 43 % cut

@@ -2,11 +2,10 @@
 
 import numpy as np
 import pytest
-
-from experiments.benches.pam import BENCH
-from experiments.config import allowed_keys, apply_overrides
-from experiments.metrics import step_metrics, tracking_metrics
-from experiments.report import SCHEMA, validate_document
+from hystmpc.experiments.benches.pam import BENCH
+from hystmpc.experiments.config import allowed_keys, apply_overrides
+from hystmpc.experiments.metrics import step_metrics, tracking_metrics
+from hystmpc.experiments.report import SCHEMA, validate_document
 
 
 def test_tracking_metrics_closed_form():
@@ -28,7 +27,7 @@ def test_step_metrics_first_order_response():
 
 
 def test_overrides_nested_and_typed():
-    config = apply_overrides(BENCH.defaults(), ["plant.hysteresis.k=0.05,0.02,0.003,0.003",
+    config = apply_overrides(BENCH.configure(), ["plant.hysteresis.k=0.05,0.02,0.003,0.003",
                                                 "nmpc.preview=false", "model.payload_kg=1.5"])
     assert config["plant"].hysteresis.k == (0.05, 0.02, 0.003, 0.003)
     assert config["nmpc"].preview is False
@@ -44,7 +43,7 @@ def test_overrides_nested_and_typed():
 ])
 def test_bad_overrides(assignment, match):
     with pytest.raises(ValueError, match=match):
-        apply_overrides(BENCH.defaults(), [assignment])
+        apply_overrides(BENCH.configure(), [assignment])
 
 
 def _doc():

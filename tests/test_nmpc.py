@@ -5,12 +5,10 @@ from dataclasses import replace
 import casadi as ca
 import numpy as np
 import pytest
-
-from experiments.bench import Scenario
-from experiments.benches.pam import BENCH, NOMINAL, inverse_inputs, prediction_model
-from experiments.runner import simulate
-from mpc.nmpc import NmpcSettings
-from plants.pam_joint import PamJoint
+from hystmpc.experiments.benches.pam import BENCH, NOMINAL
+from hystmpc.experiments.runner import Scenario
+from hystmpc.mpc import NlpSettings, NmpcSettings, SolverSettings
+from hystmpc.plants.pam_joint import PamJoint, inverse_inputs, prediction_model
 
 
 def test_prediction_model_tracks_the_nominal_plant():
@@ -38,8 +36,8 @@ def test_prediction_model_derivatives_match_finite_differences():
     rng = np.random.default_rng(2)
     for _ in range(5):
         point = np.concatenate(([rng.uniform(-30, 30), rng.normal(0, 50), rng.normal(0, 3), rng.normal(0, 10)],
-                                rng.normal(0, 3, NOMINAL.delay_samples),
                                 rng.uniform(-0.9, 0.9, 4) * np.asarray(NOMINAL.hysteresis.w),
+                                rng.normal(0, 3, NOMINAL.delay_samples),
                                 [rng.normal(0, 3), rng.normal(0, 0.2)]))
         analytic = np.asarray(jac(point))
         numeric = np.empty_like(analytic)
@@ -66,9 +64,9 @@ def test_inverse_inputs_follow_a_slow_monotone_reference():
 
 def test_nmpc_closed_loop_short_scenario_beats_pi_hc():
     scenario = BENCH.scenarios["sine-30"]
-    config = BENCH.defaults()
-    nmpc = simulate(BENCH, scenario, "nmpc", config, duration=4.0)
-    pi_hc = simulate(BENCH, scenario, "pi-hc", config, duration=4.0)
+    config = BENCH.configure()
+    nmpc = BENCH.run(scenario, "nmpc", config, duration=4.0)
+    pi_hc = BENCH.run(scenario, "pi-hc", config, duration=4.0)
     assert nmpc.solver["failures"] == 0 and nmpc.solver["fallbacks"] == 0
     assert np.all(np.isfinite(nmpc.input)) and np.all(np.isfinite(nmpc.output))
     assert np.all(np.abs(nmpc.input) <= NOMINAL.dp_limit)
@@ -79,12 +77,12 @@ def test_nmpc_closed_loop_short_scenario_beats_pi_hc():
 
 def test_nmpc_is_offset_free_under_constant_model_mismatch():
     """A constant torque the model does not know (and +10 % payload) leaves no offset."""
-    config = BENCH.defaults()
+    config = BENCH.configure()
     config["plant"] = replace(NOMINAL, pressure_noise_bar=0.0, creep_torque=0.4, creep_time=0.02,
                               payload_kg=1.1)
     config["nmpc"] = replace(config["nmpc"], horizon=10)
     scenario = Scenario("hold-12", "constant 12 deg", 6.0, lambda t: np.full_like(np.asarray(t, float), 12.0))
-    run = simulate(BENCH, scenario, "nmpc", config)
+    run = BENCH.run(scenario, "nmpc", config)
     quantum = 360.0 / NOMINAL.encoder_counts
     tail = run.reference[-50:] - run.output[-50:]
     assert abs(tail.mean()) <= quantum
@@ -93,9 +91,10 @@ def test_nmpc_is_offset_free_under_constant_model_mismatch():
 
 def test_failed_solve_falls_back_and_is_counted():
     """One iteration per sample cannot converge: every step falls back, none sends NaN."""
-    config = BENCH.defaults()
-    config["nmpc"] = NmpcSettings(horizon=5, max_iter=1)
-    run = simulate(BENCH, BENCH.scenarios["square-10"], "nmpc", config, duration=0.5)
+    config = BENCH.configure()
+    config["nmpc"] = NmpcSettings(horizon=5)
+    config["solver"] = SolverSettings(ipopt=NlpSettings(max_iter=1))
+    run = BENCH.run("square-10", "nmpc", config, duration=0.5)
     assert run.solver["failures"] > 0
     assert run.solver["fallbacks"] == run.solver["failures"]
     assert np.all(np.isfinite(run.input))
@@ -105,7 +104,7 @@ def test_failed_solve_falls_back_and_is_counted():
     ({"horizon": 1}, "horizon must be >= 2"),
     ({"solver": "nosuch"}, "allowed: ipopt, sqp"),
     ({"warm_start": "hot"}, "allowed: inverse, shift, cold"),
-    ({"q_output": 0.0}, "q_output must be > 0"),
+    ({"q_output": 0.0}, "q_output must be finite and > 0"),
 ])
 def test_settings_validation(change, match):
     with pytest.raises(ValueError, match=match):

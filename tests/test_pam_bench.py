@@ -4,19 +4,17 @@ import json
 
 import numpy as np
 import pytest
-
-from experiments.benches.pam import BENCH
-from experiments.cli import main
-from experiments.report import validate_document
-from experiments.runner import simulate
+from hystmpc.experiments.benches.pam import BENCH
+from hystmpc.experiments.cli import main
+from hystmpc.experiments.report import validate_document
 
 
 def test_compensation_helps_on_every_scenario():
     """vo2012's finding on our plant: PI + HC beats plain PI (same gains) on every scenario."""
-    config = BENCH.defaults()
+    config = BENCH.configure()
     for name, scenario in BENCH.scenarios.items():
-        pi = simulate(BENCH, scenario, "pi", config).metrics["rmse"]
-        pi_hc = simulate(BENCH, scenario, "pi-hc", config).metrics["rmse"]
+        pi = BENCH.run(scenario, "pi", config).metrics["rmse"]
+        pi_hc = BENCH.run(scenario, "pi-hc", config).metrics["rmse"]
         assert pi_hc < pi, f"{name}: RMSE pi-hc {pi_hc:.4f} >= pi {pi:.4f}"
 
 

@@ -4,9 +4,8 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-
-from experiments.benches.pam import NOMINAL, PLANT
-from plants.pam_joint import PamJoint, PamJointParams, constraint_pressure
+from hystmpc.experiments.benches.pam import NOMINAL, PLANT
+from hystmpc.plants.pam_joint import PamJoint, PamJointParams, constraint_pressure
 
 
 def test_constraint_pressure_matches_fig3_ranges():

@@ -3,8 +3,7 @@
 import casadi as ca
 import numpy as np
 import pytest
-
-from models.power_function import (
+from hystmpc.models.power_function import (
     ASCENDING_POINTS,
     DESCENDING_POINTS,
     TABLE_V,
@@ -85,64 +84,6 @@ def test_output_has_no_jumps_anywhere(model):
     tau, _ = model.simulate(s)
     slope_bound = 5e3  # N m per unit s: steeper than any polyline or transition here
     assert np.max(np.abs(np.diff(tau)) - slope_bound * np.abs(np.diff(s))) <= 1e-9
-
-
-@pytest.mark.parametrize("amplitude", [0.5, 1.0, 2.0])
-def test_forward_of_inverse_is_identity_on_scenario_references(model, amplitude):
-    ref = amplitude * np.sin(0.2 * np.pi * T)
-    state = model.initial_state()
-    s_seq = []
-    for r in ref:
-        state, s = model.inverse_step(state, r)
-        s_seq.append(s)
-    tau, _ = model.simulate(np.asarray(s_seq), model.initial_state())
-    assert np.max(np.abs(tau - ref)) <= 1e-12
-
-
-def test_smooth_step_converges_to_exact(model):
-    ref = 1.5 * np.sin(0.2 * np.pi * T) + 0.3 * np.sin(1.3 * np.pi * T)
-    state = model.initial_state()
-    s_seq = []
-    for r in ref:
-        state, s = model.inverse_step(state, r)
-        s_seq.append(s)
-    exact, _ = model.simulate(np.asarray(s_seq), model.initial_state())
-    errors = []
-    # Converges once eps is below the smallest reversal step on the path (here ~5e-7).
-    for eps in (1e-5, 1e-6, 1e-7, 1e-8):
-        smooth = model.smooth_step(eps)
-        st = model.initial_state()
-        out = []
-        for s in s_seq:
-            st, tau = smooth(st, s)
-            st = np.asarray(st).ravel()
-            out.append(float(tau))
-        errors.append(np.max(np.abs(np.asarray(out) - exact)))
-    assert errors[0] > errors[1] > errors[2] > errors[3]
-    assert errors[3] < 1e-3 * 1.8  # below 0.1 % of the 1.8 N m amplitude
-
-
-def test_smooth_step_derivatives_match_finite_differences(model):
-    smooth = model.smooth_step(1e-4)
-    z = ca.SX.sym("z", 7)
-    nxt, tau = smooth(z[:6], z[6])
-    jac = ca.Function("pf_jacobian", [z], [ca.jacobian(ca.vertcat(nxt, tau), z)])
-    fun = ca.Function("pf_value", [z], [ca.vertcat(nxt, tau)])
-    rng = np.random.default_rng(4)
-    for _ in range(20):
-        s_last = rng.uniform(-0.04, 0.04)
-        s01 = s_last + rng.uniform(0.0, 0.002)
-        point = np.array([s_last, rng.uniform(0, 1), s01, s01 - 0.002, rng.uniform(-1, 1), rng.uniform(-1, 1),
-                          s_last + rng.normal(0, 5e-4)])
-        analytic = np.asarray(jac(point))
-        numeric = np.empty_like(analytic)
-        for j in range(7):
-            h = 1e-9 if j in (0, 2, 3, 6) else 1e-6
-            plus, minus = point.copy(), point.copy()
-            plus[j] += h
-            minus[j] -= h
-            numeric[:, j] = (np.asarray(fun(plus)).ravel() - np.asarray(fun(minus)).ravel()) / (2 * h)
-        np.testing.assert_allclose(analytic, numeric, rtol=1e-4, atol=1e-3)
 
 
 def test_smooth_model_is_total():

@@ -5,9 +5,8 @@ import numpy as np
 import osqp
 import pytest
 import scipy.sparse as sp
-
-from mpc.qp import interior_point_qp
-from mpc.rti import compile_function
+from hystmpc.mpc.qp import interior_point_qp
+from hystmpc.mpc.rti import compile_function
 
 N = 10
 RATES = np.eye(N) - np.eye(N, k=-1)

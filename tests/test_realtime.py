@@ -3,17 +3,16 @@
 import json
 
 import pytest
-
-from experiments.benches import get_bench
-from experiments.cli import main
-from experiments.realtime import codegen
+from hystmpc.experiments.benches import get_bench
+from hystmpc.experiments.cli import main
+from hystmpc.experiments.realtime import codegen
 
 
 def test_codegen_round_trip_on_compliant(tmp_path):
     """The compiled RTI step and the in-process one give the same inputs in closed loop, and
     the standalone C program reproduces the in-process step."""
     bench = get_bench("compliant")
-    report = codegen(bench, bench.defaults(), tmp_path / "c", verify=True, duration=0.5)
+    report = codegen(bench, bench.configure(), tmp_path / "c", verify=True, duration=0.5)
     assert {"rti_step.c", "rti_step.h", "main.c", "Makefile", "librti_step.so", "rti_main"} <= set(report["files"])
     assert report["samples"] == 50
     assert report["max_input_difference"] <= 1e-8
@@ -31,16 +30,14 @@ def test_codegen_and_speed_reject_what_they_cannot_do(capsys, tmp_path):
     assert main(["speed", "pam", "--duration", "-1"]) == 2
     assert main(["speed", "pam", "--variants", "gn", "--duration", "0.1"]) == 2
     assert "'gn' is only available for single-shooting problems" in capsys.readouterr().err
-    assert main(["speed", "pam", "--set", "nmpc.rti_iterations=0"]) == 2
-    assert "rti_iterations must be >= 1, got 0" in capsys.readouterr().err
+    assert main(["speed", "pam", "--set", "solver.rti.iterations=0"]) == 2
+    assert "iterations must be >= 1, got 0" in capsys.readouterr().err
 
 
 def test_rti_stays_close_to_ipopt_on_a_short_run():
-    from experiments.config import apply_overrides
-    from experiments.runner import simulate
     bench = get_bench("compliant")
     scenario = bench.scenarios["sine-1"]
-    rmse = {s: simulate(bench, scenario, "nmpc", apply_overrides(bench.defaults(), [f"nmpc.solver={s}"]),
+    rmse = {s: bench.run(scenario, "nmpc", bench.configure([f"nmpc.solver={s}"]),
                         duration=3.0).metrics["rmse"] for s in ("ipopt", "rti")}
     assert rmse["rti"] <= 1.1 * rmse["ipopt"], rmse
 
@@ -58,7 +55,7 @@ def test_codegen_verify_over_the_whole_default_scenario(tmp_path, bench_name):
 @pytest.mark.slow
 def test_do_mpc_solves_the_same_problem():
     pytest.importorskip("do_mpc")
-    from experiments.peer import compare_with_do_mpc
+    from hystmpc.experiments.peer import compare_with_do_mpc
     result = compare_with_do_mpc("pam", samples=3, duration=3.0)
     for case in result["cases"]:
         assert case["relative_difference"] <= 1e-4, case
@@ -67,8 +64,7 @@ def test_do_mpc_solves_the_same_problem():
 def test_rti_step_lengths_take_the_best_of_the_shortened_steps():
     """An overshooting Gauss–Newton step (r = w³ − 1 from w = 0.1) is cut back to the best trial."""
     import casadi as ca
-
-    from mpc.rti import rti_function
+    from hystmpc.mpc.rti import rti_function
     w, p = ca.SX.sym("w"), ca.SX.sym("p")
     residual = ca.Function("r", [w, p], [w**3 - 1])
     constraints = ca.Function("g", [w, p], [ca.SX(0, 1)])
@@ -85,9 +81,8 @@ def test_repeated_rti_steps_reach_the_converged_solution_or_say_they_failed(cond
     step's qrqp gets this QP wrong, and the step reports it instead of passing it on."""
     import casadi as ca
     import numpy as np
-
-    from mpc.model import PredictionModel
-    from mpc.nmpc import Nmpc, NmpcSettings
+    from hystmpc.models import PredictionModel
+    from hystmpc.mpc import InputBounds, MultipleShootingProblem, NlpSettings, NmpcSettings, RtiSettings, SolverSettings
     x, u, d = ca.SX.sym("x", 2), ca.SX.sym("u"), ca.SX.sym("d")
     x_next = ca.vertcat(0.8 * x[0] + 0.2 * x[1], 0.7 * x[1] + 0.3 * ca.tanh(u))
     model = PredictionModel(step=ca.Function("f", [x, u, d], [x_next]),
@@ -95,16 +90,18 @@ def test_repeated_rti_steps_reach_the_converged_solution_or_say_they_failed(cond
                             measure=ca.Function("z", [x, d], [x[0] + d]), sample_period=0.01,
                             state_names=("a", "b"))
     common = {"horizon": 8, "q_output": 100.0, "r_rate": 0.1}
-    ipopt = Nmpc(model, NmpcSettings(solver="ipopt", tol=1e-12, max_iter=500, **common), -2.0, 2.0, 0.15)
-    rti = Nmpc(model, NmpcSettings(solver="rti", rti_condensed=condensed, rti_iterations=30, **common),
-               -2.0, 2.0, 0.15)
+    bounds = InputBounds(-2.0, 2.0, 0.15)
+    ipopt = MultipleShootingProblem(model, NmpcSettings(solver="ipopt", **common), bounds,
+                                    SolverSettings(ipopt=NlpSettings(tol=1e-12, max_iter=500)))
+    rti = MultipleShootingProblem(model, NmpcSettings(solver="rti", **common), bounds,
+                                  SolverSettings(rti=RtiSettings(condensed=condensed, iterations=30)))
     assert rti.condensed == condensed
     x0, dist = np.array([0.1, -0.2]), np.array([0.05])
     ref = 0.25 * np.sin(np.linspace(0.3, 2.0, 8))
-    reference = ipopt.solve(x0, dist, 0.0, ref, np.zeros(8))
+    reference = ipopt.solve(np.concatenate((x0, dist)), 0.0, ref, np.zeros(8))
     assert reference.success
     assert np.any(np.isclose(np.abs(np.diff(np.r_[0.0, reference.u_plan[:, 0]])), 0.15))  # a rate bound binds
-    result = rti.solve(x0, dist, 0.0, ref, np.zeros(8))
+    result = rti.solve(np.concatenate((x0, dist)), 0.0, ref, np.zeros(8))
     if not condensed:
         assert not result.success and result.status == "RTI_QP_Failed"
         return
@@ -117,15 +114,15 @@ def test_condensed_rti_step_without_a_rate_bound():
     """An unbounded rate leaves only the input bounds in the interior-point QP."""
     import casadi as ca
     import numpy as np
-
-    from mpc.model import PredictionModel
-    from mpc.nmpc import Nmpc, NmpcSettings
+    from hystmpc.models import PredictionModel
+    from hystmpc.mpc import InputBounds, MultipleShootingProblem, NmpcSettings, RtiSettings, SolverSettings
     x, u, d = ca.SX.sym("x"), ca.SX.sym("u"), ca.SX.sym("d")
     model = PredictionModel(step=ca.Function("f", [x, u, d], [0.5 * x + 0.5 * u]),
                             output=ca.Function("y", [x, d], [x]), measure=ca.Function("z", [x, d], [x]),
                             sample_period=0.01, state_names=("x",))
-    rti = Nmpc(model, NmpcSettings(horizon=4, solver="rti", r_rate=0.0, rti_iterations=3), -1.0, 1.0, np.inf)
-    result = rti.solve(np.zeros(1), np.zeros(1), 0.0, np.full(4, 2.0), np.zeros(4))
+    rti = MultipleShootingProblem(model, NmpcSettings(horizon=4, solver="rti", r_rate=0.0), InputBounds(-1.0, 1.0),
+                                  SolverSettings(rti=RtiSettings(iterations=3)))
+    result = rti.solve(np.zeros(2), 0.0, np.full(4, 2.0), np.zeros(4))
     assert result.success
     assert result.u_plan.ravel() == pytest.approx(np.ones(4), abs=1e-6)  # the target is out of reach: u at its bound
 
@@ -135,18 +132,18 @@ def test_condensed_rti_plan_keeps_the_rate_bound_from_an_infeasible_guess():
     before the step, so the backtracking's shortened steps keep the rate bound too."""
     import casadi as ca
     import numpy as np
-
-    from mpc.model import PredictionModel
-    from mpc.nmpc import Nmpc, NmpcSettings
+    from hystmpc.models import PredictionModel
+    from hystmpc.mpc import InputBounds, MultipleShootingProblem, NmpcSettings
     x, u, d = ca.SX.sym("x"), ca.SX.sym("u"), ca.SX.sym("d")
     model = PredictionModel(step=ca.Function("f", [x, u, d], [0.6 * x + 0.4 * ca.sinh(2 * u)]),
                             output=ca.Function("y", [x, d], [x]), measure=ca.Function("z", [x, d], [x]),
                             sample_period=0.01, state_names=("x",))
-    rti = Nmpc(model, NmpcSettings(horizon=6, solver="rti", r_rate=0.01), -2.0, 2.0, 0.1)
+    rti = MultipleShootingProblem(model, NmpcSettings(horizon=6, solver="rti", r_rate=0.01),
+                                  InputBounds(-2.0, 2.0, 0.1))
     rng = np.random.default_rng(4)
     for _ in range(40):
         guess = rng.uniform(-2.0, 2.0, 6)
-        result = rti.solve(rng.normal(size=1), np.zeros(1), 0.0, rng.uniform(-3, 3, 6), guess)
+        result = rti.solve(np.concatenate((rng.normal(size=1), np.zeros(1))), 0.0, rng.uniform(-3, 3, 6), guess)
         rates = np.diff(np.r_[0.0, result.u_plan[:, 0]])
         assert result.success
         assert np.max(np.abs(rates)) <= 0.1 + 1e-7

@@ -4,12 +4,12 @@ import json
 
 import numpy as np
 import pytest
-
-from experiments.baselines import Replay
-from experiments.benches.reluctance import BENCH, identified_model, offline_optimum
-from experiments.cli import main
-from experiments.config import apply_overrides
-from experiments.runner import reference_samples, simulate
+from hystmpc.experiments.baselines import Replay
+from hystmpc.experiments.benches.reluctance import BENCH, identified_model, rig
+from hystmpc.experiments.cli import main
+from hystmpc.experiments.config import apply_overrides
+from hystmpc.experiments.runner import reference_samples, simulate
+from hystmpc.models.reluctance import offline_optimum
 
 
 def test_identify_command_writes_the_model(tmp_path, capsys):
@@ -25,33 +25,33 @@ def test_identify_command_writes_the_model(tmp_path, capsys):
 
 
 def test_scenario_fixes_the_air_gap():
-    run = simulate(BENCH, BENCH.scenarios["ramp-1.2mm"], "poly-inverse", BENCH.defaults(), duration=0.01)
+    run = BENCH.run(BENCH.scenarios["ramp-1.2mm"], "poly-inverse", BENCH.configure(), duration=0.01)
     assert run.parameters["rig"]["gap_mm"] == 1.2
-    run = simulate(BENCH, BENCH.scenarios["ccore-ramp-1.5mm"], "poly-inverse", BENCH.defaults(), duration=0.01)
+    run = BENCH.run(BENCH.scenarios["ccore-ramp-1.5mm"], "poly-inverse", BENCH.configure(), duration=0.01)
     assert run.parameters["rig"]["core"] == "C"
 
 
 def test_controllers_use_the_identified_model_not_the_plant():
-    model = identified_model(BENCH.defaults())
-    plant = BENCH.defaults()["ecore"]
+    model = identified_model(BENCH.configure())
+    plant = BENCH.configure()["ecore"]
     assert model.p1 != plant.p1 and model.p2 != plant.p2
 
 
 def test_hyst_inverse_beats_poly_inverse_on_a_ramp_start():
-    config = BENCH.defaults()
+    config = BENCH.configure()
     scenario = BENCH.scenarios["ramp-1.5mm"]
-    hyst = simulate(BENCH, scenario, "hyst-inverse", config, duration=1.0)
-    poly = simulate(BENCH, scenario, "poly-inverse", config, duration=1.0)
+    hyst = BENCH.run(scenario, "hyst-inverse", config, duration=1.0)
+    poly = BENCH.run(scenario, "poly-inverse", config, duration=1.0)
     assert hyst.metrics["max_abs_error"] < 0.1
     assert hyst.metrics["rmse"] < 0.5 * poly.metrics["rmse"]
 
 
 def test_nmpc_on_the_first_force_steps():
     """Feed-forward NMPC with preview ramps the current before the step; slew limit held."""
-    config = BENCH.defaults()
+    config = BENCH.configure()
     scenario = BENCH.scenarios["steps-1.5mm"]
-    nmpc = simulate(BENCH, scenario, "nmpc", config, duration=0.12)
-    hyst = simulate(BENCH, scenario, "hyst-inverse", config, duration=0.12)
+    nmpc = BENCH.run(scenario, "nmpc", config, duration=0.12)
+    hyst = BENCH.run(scenario, "hyst-inverse", config, duration=0.12)
     plant = config["ecore"]
     assert np.all(np.isfinite(nmpc.input))
     assert np.max(np.abs(np.diff(nmpc.input))) <= plant.slew_limit * plant.sample_period + 1e-9
@@ -61,30 +61,26 @@ def test_nmpc_on_the_first_force_steps():
 
 def test_offline_optimum_bounds_the_steps_ratio():
     """Knowing the whole reference, the best slew-limited currents reach only ~0.52× the
-    hyst-inverse RMSE on steps-1.5mm: issue 4's ≤ 0.5 is below what any controller can do."""
+    hyst-inverse RMSE on steps-1.5mm: a criterion of ≤ 0.5 is below what any controller can do."""
     scenario = BENCH.scenarios["steps-1.5mm"]
-    config = apply_overrides(BENCH.defaults(), list(scenario.conditions))
+    config = apply_overrides(BENCH.configure(), list(scenario.conditions))
     _, ref = reference_samples(scenario, BENCH.sample_period)
-    currents = offline_optimum(config, ref)
-    plant = config["ecore"]
-    assert np.max(np.abs(np.diff(currents))) <= plant.slew_limit * plant.sample_period + plant.p1
-    actuator, out = BENCH.make_plant(config), np.empty(len(ref))
-    meas, replay = actuator.reset(0), Replay(currents)
-    for k in range(len(ref)):
-        out[k] = meas.y
-        meas = actuator.step(replay.step(meas, ref[k:k + 1]))
-    best = np.sqrt(np.mean((out - ref) ** 2))
-    hyst = simulate(BENCH, scenario, "hyst-inverse", BENCH.defaults()).metrics["rmse"]
+    plant, gap, _ = rig(config)
+    slew = plant.slew_limit * plant.sample_period
+    currents = offline_optimum(identified_model(config), gap, ref, plant.current_limit, slew)
+    assert np.max(np.abs(np.diff(currents))) <= slew + plant.p1
+    best = simulate(BENCH.build_plant(config), Replay(currents), ref).metrics["rmse"]
+    hyst = BENCH.run(scenario, "hyst-inverse", BENCH.configure()).metrics["rmse"]
     assert 0.5 < best / hyst < 0.55, best / hyst
 
 
 @pytest.mark.slow
 def test_calibration_on_the_e_core_ramps():
     """katalenic2013: hysteresis inverse ≤ 0.3 N (paper 0.1 N) and ≥ 5× better than the polynomial."""
-    config = BENCH.defaults()
+    config = BENCH.configure()
     for gap in ("1.2", "1.3", "1.5", "1.7"):
         scenario = BENCH.scenarios[f"ramp-{gap}mm"]
-        hyst = simulate(BENCH, scenario, "hyst-inverse", config).metrics["max_abs_error"]
-        poly = simulate(BENCH, scenario, "poly-inverse", config).metrics["max_abs_error"]
+        hyst = BENCH.run(scenario, "hyst-inverse", config).metrics["max_abs_error"]
+        poly = BENCH.run(scenario, "poly-inverse", config).metrics["max_abs_error"]
         assert hyst <= 0.3, (gap, hyst)
         assert poly >= 5 * hyst, (gap, poly, hyst)

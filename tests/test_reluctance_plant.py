@@ -4,9 +4,8 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-
-from models.parametric import identify_major_loop
-from plants.reluctance import C_CORE, ReluctanceActuator, ReluctanceParams, major_loop_measurement, static_force
+from hystmpc.models.parametric import identify_major_loop
+from hystmpc.plants.reluctance import C_CORE, ReluctanceActuator, ReluctanceParams, major_loop_measurement, static_force
 
 GAPS = [1.2e-3, 1.3e-3, 1.5e-3, 1.7e-3, 1.75e-3]
 

@@ -11,9 +11,8 @@ import time
 from pathlib import Path
 
 import pytest
-
-from experiments.cli import main
-from experiments.sweep import (
+from hystmpc.experiments.cli import main
+from hystmpc.experiments.sweep import (
     SweepSpec,
     load_spec,
     make_tasks,
@@ -105,8 +104,8 @@ def test_tasks_are_the_full_factorial_with_shared_seeded_plants(tmp_path):
 
 
 def test_tuple_parameters_scale_element_wise():
-    from experiments.benches import get_bench
-    from experiments.config import apply_overrides, get_value
+    from hystmpc.experiments.benches import get_bench
+    from hystmpc.experiments.config import apply_overrides, get_value
     config = get_bench("pam").defaults()
     assignments = scaled_assignments(config, {"plant.hysteresis.k": 1.1, "plant.damping": 0.9})
     new = apply_overrides(config, assignments)
@@ -187,7 +186,7 @@ def test_resume_refuses_another_spec_and_a_fresh_run_refuses_an_old_folder(tmp_p
 
 
 def _cli(*args) -> list[str]:
-    return [sys.executable, "-m", "experiments", "sweep", *args]
+    return [sys.executable, "-m", "hystmpc.experiments", "sweep", *args]
 
 
 def test_sigkill_half_way_then_resume_gives_every_record_once(tmp_path):

@@ -2,26 +2,26 @@
 
 from __future__ import annotations
 
-from experiments.bench import Bench
+from hystmpc.experiments.bench import Bench
 
 
 def _pam() -> Bench:
-    from experiments.benches.pam import BENCH
+    from hystmpc.experiments.benches.pam import BENCH
     return BENCH
 
 
 def _compliant() -> Bench:
-    from experiments.benches.compliant import BENCH
+    from hystmpc.experiments.benches.compliant import BENCH
     return BENCH
 
 
 def _reluctance() -> Bench:
-    from experiments.benches.reluctance import BENCH
+    from hystmpc.experiments.benches.reluctance import BENCH
     return BENCH
 
 
 def _dea() -> Bench:
-    from experiments.benches.dea import BENCH
+    from hystmpc.experiments.benches.dea import BENCH
     return BENCH
 
 

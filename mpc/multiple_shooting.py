@@ -1,0 +1,156 @@
+"""Multiple-shooting tracking problem built on a :class:`hystmpc.models.prediction.PredictionModel`."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+from hystmpc.models.prediction import PredictionModel
+from hystmpc.mpc.problem import Solution, TrackingProblem
+from hystmpc.mpc.rti import compile_function, rti_function
+from hystmpc.mpc.settings import InputBounds, NmpcSettings, SolverSettings
+
+
+class MultipleShootingProblem(TrackingProblem):
+    """Minimise Σ q (y_k − r_k)² + r_rate Δu² + r_input (u − u_ff)² over states and inputs.
+
+    Subject to ``x_{k+1} = F(x_k, u_k, d)``, the input bounds and ``|u_k − u_{k−1}| <= rate``
+    (with ``u_{−1}`` the input applied last sample). The condition is ``[x0; d]``.
+
+    Parameters
+    ----------
+    model : PredictionModel
+        Nominal discrete-time model.
+    settings : NmpcSettings
+        Horizon, weights, solver.
+    bounds : InputBounds
+        Input bounds and largest input change per sample (scalar input).
+    solvers : SolverSettings
+        Settings of every solver (``solver.gn`` does not apply: single shooting only).
+    """
+
+    multiple_shooting = True
+
+    def __init__(self, model: PredictionModel, settings: NmpcSettings, bounds: InputBounds,
+                 solvers: SolverSettings | None = None):
+        if model.nu != 1:
+            raise ValueError(f"only scalar inputs are supported, model has nu={model.nu}")
+        if settings.solver == "gn":
+            raise ValueError("solver 'gn' is only available for single-shooting problems; "
+                             "allowed here: ipopt, sqp, rti, rti-c")
+        super().__init__(settings, bounds, solvers or SolverSettings(), model.nx + model.nd)
+        self.model = model
+        self.condensed = settings.solver in ("rti", "rti-c") and self.solvers.rti.condensed
+        self._build()
+
+    def _build(self) -> None:
+        m, s = self.model, self.settings
+        N, nx, nd = s.horizon, m.nx, m.nd
+        X = ca.SX.sym("X", nx, N + 1)
+        U = ca.SX.sym("U", 1, N)
+        x0 = ca.SX.sym("x0", nx)
+        d = ca.SX.sym("d", nd)
+        u_prev = ca.SX.sym("u_prev")
+        ref = ca.SX.sym("ref", N)
+        u_ff = ca.SX.sym("u_ff", N)
+        shooting = [X[:, 0] - x0]
+        rates, residuals = [], []
+        for k in range(N):
+            shooting.append(X[:, k + 1] - m.step(X[:, k], U[0, k], d))
+            e = m.output(X[:, k + 1], d) - ref[k]
+            du = U[0, k] - (u_prev if k == 0 else U[0, k - 1])
+            rates.append(du)
+            residuals += [np.sqrt(s.q_output) * e, np.sqrt(s.r_rate) * du,
+                          np.sqrt(s.r_input) * (U[0, k] - u_ff[k])]
+        residual = ca.vertcat(*residuals)
+        w = ca.vertcat(ca.vec(X), ca.vec(U))
+        g = ca.vertcat(*shooting, *rates)
+        p = ca.vertcat(x0, d, u_prev, ref, u_ff)
+        self.residual = ca.Function("nmpc_residual", [w, p], [residual], ["w", "p"], ["r"])
+        self.constraints = ca.Function("nmpc_constraints", [w, p], [g], ["w", "p"], ["g"])
+        n_shoot = nx * (N + 1)
+        self._lbg = np.concatenate((np.zeros(n_shoot), -self.du_max * np.ones(N)))
+        self._ubg = np.concatenate((np.zeros(n_shoot), self.du_max * np.ones(N)))
+        self._lbx = np.concatenate((-np.inf * np.ones(n_shoot), self.u_min * np.ones(N)))
+        self._ubx = np.concatenate((np.inf * np.ones(n_shoot), self.u_max * np.ones(N)))
+        self._n_shoot = n_shoot
+        if s.solver in ("ipopt", "sqp"):
+            self._uses_nlp_solver({"x": w, "f": ca.sumsqr(residual), "g": g, "p": p})
+            return
+        if self.condensed:
+            self.rti = self._condensed_rti(p)
+        else:  # the shooting gaps are equalities and the states unbounded: qrqp
+            self.rti = rti_function(self.residual, self.constraints, self._lbg, self._ubg, self._lbx, self._ubx)
+        if s.solver == "rti-c":
+            self.rti = compile_function(self.rti)
+
+    def _condensed_rti(self, p: ca.SX) -> ca.Function:
+        """The RTI step over the inputs only: the states come from a rollout from x0.
+
+        With no state constraints in this problem, eliminating the states leaves only the
+        input bounds and the rate bounds, which are linear in U. A shortened Gauss–Newton
+        step then stays feasible, so the step can backtrack on the cost (``step_lengths``).
+        The QP goes to the interior-point solver of :mod:`hystmpc.mpc.qp` (qrqp gets some of these
+        QPs wrong).
+        """
+        m, s = self.model, self.settings
+        N, nx, nd = s.horizon, m.nx, m.nd
+        U = ca.SX.sym("U", N)
+        x0, d, u_prev = p[:nx], p[nx: nx + nd], p[nx + nd]
+        ref, u_ff = p[nx + nd + 1: nx + nd + 1 + N], p[nx + nd + 1 + N:]
+        x, states, residuals = x0, [x0], []
+        for k in range(N):
+            x = m.step(x, U[k], d)
+            states.append(x)
+            du = U[k] - (u_prev if k == 0 else U[k - 1])
+            residuals += [np.sqrt(s.q_output) * (m.output(x, d) - ref[k]), np.sqrt(s.r_rate) * du,
+                          np.sqrt(s.r_input) * (U[k] - u_ff[k])]
+        n_rates = N if np.isfinite(self.du_max) else 0  # no rate rows for an unbounded rate
+        rates = (U - ca.vertcat(u_prev, U[:-1]))[:n_rates]
+        self.rollout = ca.Function("nmpc_rollout", [U, p], [ca.horzcat(*states).T])
+        return rti_function(ca.Function("residual", [U, p], [ca.vertcat(*residuals)]),
+                            ca.Function("constraints", [U, p], [rates]),
+                            -self.du_max * np.ones(n_rates), self.du_max * np.ones(n_rates),
+                            self.u_min * np.ones(N), self.u_max * np.ones(N),
+                            step_lengths=(0.5, 0.25, 0.125), qp="ipm", qp_iterations=self.solvers.rti.qp_iterations)
+
+    def solve(self, condition, u_prev: float, ref, u_guess, x_guess=None, u_ff=None) -> Solution:
+        """Solve the NLP from ``condition = [x0; d]`` for the references ``ref[0..N-1]`` = r_{k+1..k+N}.
+
+        Parameters
+        ----------
+        condition : array_like, shape (nx + nd,)
+            Current state estimate and disturbance estimate (held over the horizon).
+        u_prev : float
+            Input applied in the previous sample (for the rate bound).
+        ref : array_like, shape (N,)
+            Output references for the predicted samples 1..N.
+        u_guess : array_like, shape (N,)
+            Initial input guess.
+        x_guess : array_like, shape (N+1, nx), optional
+            Initial state guess; default: roll the model out under ``u_guess``. Unused by
+            the condensed RTI step, which rolls out itself.
+        u_ff : array_like, shape (N,), optional
+            Feed-forward inputs that ``r_input`` pulls towards (default ``u_guess``).
+        """
+        N, nx = self.horizon, self.model.nx
+        condition = np.asarray(condition, float).ravel()
+        x0, d = condition[:nx], condition[nx:]
+        u_guess = np.clip(np.asarray(u_guess, float).ravel(), self.u_min, self.u_max)
+        u_ff = u_guess if u_ff is None else np.asarray(u_ff, float).ravel()
+        p = self._parameters(condition, u_prev, ref, u_ff)
+        if self.condensed:  # backtracking keeps feasibility only from a feasible start
+            w0 = self.feasible_start(u_guess, u_prev)
+        else:
+            x_start = self.model.rollout(x0, u_guess, d) if x_guess is None else x_guess
+            w0 = np.concatenate((np.asarray(x_start, float).ravel(), u_guess))
+        if self.rti is not None:
+            def finish(w, finite):
+                if self.condensed:
+                    x_plan = np.asarray(self.rollout(w, p)) if finite else np.full((N + 1, nx), np.nan)
+                    return w.reshape(N, 1), x_plan
+                return w[self._n_shoot:].reshape(N, 1), w[: self._n_shoot].reshape(N + 1, nx)
+            return self._solve_rti(w0, p, finish)
+        args = {"x0": w0, "p": p, "lbx": self._lbx, "ubx": self._ubx, "lbg": self._lbg, "ubg": self._ubg}
+        w, success, status, iterations, elapsed = self._solve_nlp(args, warm=x_guess is not None)
+        return Solution(u_plan=w[self._n_shoot:].reshape(N, 1), x_plan=w[: self._n_shoot].reshape(N + 1, nx),
+                        success=success, status=status, iterations=iterations, solve_time=elapsed)

@@ -1,0 +1,231 @@
+"""What the NMPC knows each sample: the state estimate and the problem's initial condition.
+
+Two observers cover the prediction models of :mod:`hystmpc.models.prediction`:
+
+* :class:`StateObserver`: an EKF on the whole model, for a hysteresis driven by a state
+  (its memory can only be estimated);
+* :class:`MemoryObserver`: for an input-driven model, the dead time, the hysteresis and
+  the creep follow exactly from the inputs applied, so they are run exactly; an EKF
+  estimates only the dynamics (or nothing, for a feed-forward actuator without sensors).
+
+Both restart from the sensors when the estimate stops being finite, and count it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from hystmpc.models.fractional import gl_weights
+from hystmpc.models.prediction import CreepPredictionModel, InputMemory, PredictionModel
+from hystmpc.mpc.estimator import DisturbanceEKF
+
+
+@dataclass
+class Estimate:
+    """The observer's knowledge at one sample."""
+
+    x: np.ndarray
+    """State of the prediction model (for a creep model: of its dynamics)."""
+    d: np.ndarray
+    """Disturbance estimate."""
+    hysteresis: np.ndarray | None = None
+    """Exact hysteresis state (input-driven models)."""
+    history: np.ndarray | None = None
+    """Creep history terms over the horizon (creep models)."""
+
+
+def _finite(*arrays) -> bool:
+    return all(np.all(np.isfinite(a)) for a in arrays)
+
+
+class StateObserver:
+    """EKF on ``[x; d]`` of the whole prediction model.
+
+    Parameters
+    ----------
+    model : PredictionModel
+        The prediction model.
+    ekf : DisturbanceEKF
+        An EKF on ``model``.
+    initial_state : callable
+        ``z -> x0``: a state estimate from the first sensor vector.
+    initial_covariance : array_like
+        Diagonal of the EKF's covariance on ``[x; d]`` at a (re)start.
+    """
+
+    def __init__(self, model: PredictionModel, ekf: DisturbanceEKF, initial_state: Callable,
+                 initial_covariance):
+        self.model, self.ekf, self.initial_state = model, ekf, initial_state
+        self.initial_covariance = np.asarray(initial_covariance, float)
+        self.predicted_output = float("nan")
+
+    def reset(self) -> None:
+        """Nothing to forget: the first :meth:`update` starts the estimate."""
+        self.predicted_output = float("nan")
+
+    def _restart(self, z) -> None:
+        self.ekf.reset(np.asarray(self.initial_state(z), float), np.zeros(self.model.nd), self.initial_covariance)
+
+    def update(self, z, u_last: float | None) -> bool:
+        """Time update with the input applied last sample (None: first sample), measurement update.
+
+        Returns True when the estimate was not finite and restarted from ``z``.
+        """
+        ekf = self.ekf
+        if u_last is None:
+            self._restart(z)
+        else:
+            ekf.predict([u_last])
+        self.predicted_output = float(self.model.output(ekf.x, ekf.d))
+        ekf.update(z)
+        if _finite(ekf.x, ekf.d):
+            return False
+        self._restart(z)
+        return True
+
+    def estimate(self, horizon: int) -> Estimate:
+        """The current estimate."""
+        return Estimate(self.ekf.x.copy(), self.ekf.d.copy())
+
+    def condition(self, estimate: Estimate) -> np.ndarray:
+        """``[x; d]``: the multiple-shooting problem's initial condition."""
+        return np.concatenate((estimate.x, estimate.d))
+
+
+class MemoryObserver:
+    """Exact dead time, hysteresis and creep from the applied inputs; an EKF on the dynamics.
+
+    Parameters
+    ----------
+    model : PredictionModel or CreepPredictionModel
+        An input-driven model (``model.memory`` set).
+    ekf : DisturbanceEKF, optional
+        An EKF on ``model.memory.dynamics``; None for a model without dynamic states or
+        sensors (the state then follows the inputs open loop).
+    initial_state : callable, optional
+        ``z -> x_dyn0`` (default: zeros).
+    initial_covariance : array_like, optional
+        Diagonal of the EKF's covariance on ``[x_dyn; d]`` at a (re)start.
+    creep_window : int, optional
+        Past samples in the creep sums (None: the whole memory).
+    rest_input : float
+        Input the actuator rests at before the first sample.
+    """
+
+    def __init__(self, model: PredictionModel | CreepPredictionModel, ekf: DisturbanceEKF | None = None,
+                 initial_state: Callable | None = None, initial_covariance=None,
+                 creep_window: int | None = None, rest_input: float = 0.0):
+        if model.memory is None:
+            raise ValueError("a MemoryObserver needs an input-driven model (model.memory is None)")
+        self.model, self.ekf = model, ekf
+        self.memory: InputMemory = model.memory
+        if ekf is None and self.memory.n_dynamic:
+            raise ValueError("a model with dynamic states needs an EKF on model.memory.dynamics")
+        n_dyn = self.memory.n_dynamic
+        self.initial_state = initial_state or (lambda z: np.zeros(n_dyn))
+        self.initial_covariance = None if initial_covariance is None else np.asarray(initial_covariance, float)
+        self.creep_window, self.rest_input = creep_window, float(rest_input)
+        self.creeping = isinstance(model, CreepPredictionModel)
+        self.reset()
+
+    def reset(self) -> None:
+        """At rest: relaxed hysteresis, a queue of the rest input, empty creep memory."""
+        mem = self.memory
+        self.hysteresis_state = mem.hysteresis.initial_state(self.rest_input)
+        self.queue = [self.rest_input] * mem.delay_samples
+        self.creep = None
+        if self.creeping:
+            from hystmpc.models.fractional import GrunwaldLetnikov
+            self.creep = GrunwaldLetnikov(-mem.creep_order, self.model.sample_period, self.creep_window)
+        self.x = np.zeros(mem.n_dynamic)
+        self.d = np.zeros(self.model.nd)
+        self.predicted_output = float("nan")
+
+    def _restart(self, z) -> None:
+        if self.ekf is not None:
+            self.ekf.reset(np.asarray(self.initial_state(z), float), np.zeros(self.model.nd), self.initial_covariance)
+
+    def update(self, z, u_last: float | None) -> bool:
+        """Run the exact memory with the input applied last sample (None: first sample), then
+        the EKF. Returns True when the estimate was not finite and restarted from ``z``."""
+        if u_last is None:
+            self._restart(z)
+        else:
+            self.queue.append(float(u_last))
+            u_in = self.queue.pop(0)
+            self.hysteresis_state, h = self.memory.hysteresis.step(self.hysteresis_state, u_in)
+            if self.creep is not None:
+                h = self.creep.push(h)
+            if self.ekf is not None:
+                self.ekf.predict([h])
+        restarted = False
+        if self.ekf is not None:
+            ekf = self.ekf
+            self.predicted_output = float(self.memory.dynamics.output(ekf.x, ekf.d))
+            ekf.update(z)
+            if not _finite(ekf.x, ekf.d):
+                self._restart(z)
+                restarted = True
+            self.x, self.d = ekf.x, ekf.d
+        else:
+            self.predicted_output = float(self.model.output(self._state(self.x), self.d))
+        return restarted
+
+    def _state(self, x_dyn) -> np.ndarray:
+        return np.concatenate((x_dyn, self.hysteresis_state, self.queue))
+
+    def estimate(self, horizon: int) -> Estimate:
+        """The current estimate (with the creep history over ``horizon`` samples, if any)."""
+        history = self.creep.history_terms(horizon) if self.creep is not None else None
+        x = self.x.copy() if self.creeping else self._state(self.x)
+        return Estimate(x, self.d.copy(), self.hysteresis_state.copy(), history)
+
+    def condition(self, estimate: Estimate) -> np.ndarray:
+        """The problem's initial condition: ``[x; d]`` (Markov model) or the creep model's
+        ``[hysteresis state, x_dyn, d, history]``."""
+        if self.creeping:
+            return np.concatenate((estimate.hysteresis, estimate.x, estimate.d, estimate.history))
+        return np.concatenate((estimate.x, estimate.d))
+
+
+def memory_inverse(memory: InputMemory, sample_period: float) -> Callable[[Estimate, np.ndarray], np.ndarray]:
+    """The inverse warm start of an input-driven model, from its parts.
+
+    For each reference (the one the input reaches after the dead time): the static
+    inverse of the dynamics gives the hysteresis output that holds it (corrected by the
+    disturbance where it enters), the creep inverse the creep-free output (the GL sum
+    solved for its newest term), and the hysteresis model's ``inverse_step`` the input.
+    A target the hysteresis cannot reach keeps the previous input (NaN before the first).
+    """
+    if memory.steady_input is None:
+        raise ValueError("the model's dynamics give no steady_input: pass an inverse, or use "
+                         "nmpc.warm_start=shift")
+    steady, mode, hysteresis = memory.steady_input, memory.disturbance, memory.hysteresis
+    alpha = memory.creep_order
+
+    def inverse(est: Estimate, refs) -> np.ndarray:
+        refs = np.asarray(refs, float)
+        n, D = len(refs), memory.delay_samples
+        reached = refs[np.minimum(np.arange(n) + D, n - 1)]  # the input acts after the dead time
+        d = float(est.d[0]) if len(est.d) else 0.0
+        targets = np.asarray(steady(reached - d) if mode == "output" else
+                             steady(reached) - d if mode == "hysteresis" else steady(reached), float)
+        state = est.hysteresis.copy()
+        c = gl_weights(-alpha, n) if alpha else None
+        ws, out = [], np.empty(n)
+        u = np.nan  # until the first reachable target (the controller fills in the last input)
+        for j in range(n):
+            h = targets[j]
+            if c is not None:
+                past = sum(c[i] * ws[j - i] for i in range(1, j + 1))
+                h = (h - est.history[j]) / sample_period**alpha - past
+            try:
+                state, u = hysteresis.inverse_step(state, float(h))
+            except ValueError:
+                pass  # out of the hysteresis' reach: hold the input
+            ws.append(hysteresis.output(state))
+            out[j] = u
+        return out
+    return inverse

@@ -1,0 +1,142 @@
+"""What the multiple- and single-shooting tracking problems share: solvers, solves, results.
+
+Both minimise ``Σ q (y_k − r_k)² + r_rate Δu_k² + r_input (u_k − u_ff,k)²`` subject to the
+input bounds and the rate bound. Their parameter vector is laid out the same way:
+``p = [condition, u_prev, ref_1..ref_N, u_ff_1..u_ff_N]``, where ``condition`` is what the
+estimator hands over (the multiple-shooting problem's ``[x0; d]``, the single-shooting
+problem's prediction parameters) — :meth:`TrackingProblem.parameter_layout` names the parts.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+from hystmpc.mpc.rti import QP_TOLERANCE, feasible_guess, rti_steps
+from hystmpc.mpc.settings import InputBounds, NlpSettings, NmpcSettings, SolverSettings
+
+
+@dataclass
+class Solution:
+    """Result of one solve of a tracking problem."""
+
+    u_plan: np.ndarray
+    """Optimal inputs over the horizon, shape (N, 1)."""
+    x_plan: np.ndarray | None
+    """Predicted states, shape (N+1, nx), for multiple-shooting problems; None otherwise."""
+    success: bool
+    """Whether the solver reported convergence (and every value is finite)."""
+    status: str
+    """Solver's return status."""
+    iterations: int
+    """Solver iterations."""
+    solve_time: float
+    """Wall-clock time of the solve (s)."""
+
+
+def nlp_solver(name: str, nlp: dict, solver: str, settings: NlpSettings) -> ca.Function:
+    """IPOPT or sqpmethod + qrqp for ``nlp``, quiet, with the settings and pass-through options.
+
+    Raises ``ValueError`` naming an option the solver does not know.
+    """
+    s = settings
+    if solver == "ipopt":
+        opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.max_iter": s.max_iter,
+                "ipopt.tol": s.tol, "ipopt.acceptable_tol": 1e3 * s.tol, "record_time": True}
+        if s.warm_multipliers:
+            opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
+                         "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6})
+        opts.update({f"ipopt.{k}": v for k, v in s.options.items()})
+    else:
+        opts = {"qpsol": "qrqp", "qpsol_options": {"print_iter": False, "print_header": False,
+                                                   "error_on_fail": False},
+                "max_iter": s.max_iter, "tol_du": s.tol, "tol_pr": s.tol, "print_header": False,
+                "print_iteration": False, "print_status": False, "print_time": False,
+                "record_time": True, "error_on_fail": False}
+        opts.update(s.options)
+    try:
+        return ca.nlpsol(name, "ipopt" if solver == "ipopt" else "sqpmethod", nlp, opts)
+    except RuntimeError as exc:
+        raise ValueError(f"solver.{solver}.options: {str(exc).strip().splitlines()[-1]}") from None
+
+
+class TrackingProblem:
+    """Base of :class:`MultipleShootingProblem` and :class:`SingleShootingProblem`.
+
+    Parameters
+    ----------
+    settings : NmpcSettings
+        Horizon, weights, solver variant.
+    bounds : InputBounds
+        Input bounds and rate bound (scalar input).
+    solvers : SolverSettings
+        Settings of every solver; the one ``settings.solver`` names is used.
+    n_condition : int
+        Length of the condition part of ``p``.
+    """
+
+    multiple_shooting = False
+
+    def __init__(self, settings: NmpcSettings, bounds: InputBounds, solvers: SolverSettings, n_condition: int):
+        self.settings, self.bounds, self.solvers = settings, bounds, solvers
+        self.u_min, self.u_max, self.du_max = float(bounds.lower), float(bounds.upper), float(bounds.rate)
+        self.n_condition = n_condition
+        self.rti: ca.Function | None = None
+        self._solver: ca.Function | None = None
+        self._lam = None
+
+    @property
+    def horizon(self) -> int:
+        """Prediction horizon N."""
+        return self.settings.horizon
+
+    def parameter_layout(self) -> dict[str, slice]:
+        """Where each part of the parameter vector ``p`` sits."""
+        n, N = self.n_condition, self.horizon
+        return {"condition": slice(0, n), "u_prev": slice(n, n + 1), "ref": slice(n + 1, n + 1 + N),
+                "u_ff": slice(n + 1 + N, n + 1 + 2 * N)}
+
+    def _parameters(self, condition, u_prev: float, ref, u_ff) -> np.ndarray:
+        return np.concatenate((np.asarray(condition, float).ravel(), [u_prev], np.asarray(ref, float).ravel(),
+                               np.asarray(u_ff, float).ravel()))
+
+    def _uses_nlp_solver(self, nlp: dict) -> None:
+        solver = self.settings.solver
+        self._solver = nlp_solver("nmpc", nlp, solver, getattr(self.solvers, solver))
+
+    def _solve_rti(self, w0, p, finish) -> Solution:
+        """``rti.iterations`` RTI steps from ``w0``; ``finish(w, finite)`` -> (u_plan, x_plan)."""
+        iterations = self.solvers.rti.iterations
+        start = time.perf_counter()
+        w, qp_error = rti_steps(self.rti, w0, p, iterations)
+        elapsed = time.perf_counter() - start
+        finite = bool(np.all(np.isfinite(w)))
+        ok = finite and qp_error <= QP_TOLERANCE
+        u_plan, x_plan = finish(w, finite)
+        status = "RTI_Step" if ok else ("RTI_Non_Finite" if not finite else "RTI_QP_Failed")
+        return Solution(u_plan=u_plan, x_plan=x_plan, success=ok, status=status, iterations=iterations,
+                        solve_time=elapsed)
+
+    def _solve_nlp(self, args: dict, warm: bool) -> tuple[np.ndarray, bool, str, int, float]:
+        """One IPOPT/sqpmethod solve; returns the solution vector, success, status, iterations, time."""
+        nlp_settings: NlpSettings = getattr(self.solvers, self.settings.solver)
+        if nlp_settings.warm_multipliers and self._lam is not None and warm:
+            args["lam_x0"], args["lam_g0"] = self._lam
+        start = time.perf_counter()
+        sol = self._solver(**args)
+        elapsed = time.perf_counter() - start
+        stats = self._solver.stats()
+        w = np.asarray(sol["x"]).ravel()
+        success = bool(stats.get("success", False)) and bool(np.all(np.isfinite(w)))
+        self._lam = (np.asarray(sol["lam_x"]).ravel(), np.asarray(sol["lam_g"]).ravel()) if success else None
+        return w, success, str(stats.get("return_status", "")), int(stats.get("iter_count", -1)), elapsed
+
+    def feasible_start(self, u_guess, u_prev: float) -> np.ndarray:
+        """The guess made input- and rate-feasible (backtracking RTI steps need that)."""
+        return feasible_guess(u_guess, u_prev, self.u_min, self.u_max, self.du_max)
+
+    def solve(self, condition, u_prev: float, ref, u_guess, x_guess=None, u_ff=None) -> Solution:
+        """Solve for the references ``ref`` (r_{k+1..k+N}) from ``condition``."""
+        raise NotImplementedError

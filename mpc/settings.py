@@ -1,0 +1,166 @@
+"""Settings of the NMPC: the problem (``nmpc``), the input bounds, and each solver's own (``solver``).
+
+On the command line these are the ``--set`` groups ``nmpc.*`` and ``solver.<name>.*``; the
+smoothing of the prediction model is a group of its own (``smoothing.*``), because it
+belongs to the model, not to the controller.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+SOLVERS = ("ipopt", "sqp", "rti", "rti-c", "gn")
+"""Solver variants: IPOPT (robust default); CasADi sqpmethod + qrqp; ``rti``, one Gauss–Newton
+SQP step per sample as one CasADi Function (:mod:`hystmpc.mpc.rti`; on multiple-shooting
+problems condensed onto the inputs, with the interior-point QP of :mod:`hystmpc.mpc.qp`);
+``rti-c``, the same generated as C, compiled and loaded; ``gn``, Gauss–Newton SQP to
+convergence (single-shooting problems only)."""
+WARM_STARTS = ("inverse", "shift", "cold")
+
+
+def _check_finite(obj, names, low: float = 0.0, strict: bool = False) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        ok = np.isfinite(value) and (value > low if strict else value >= low)
+        if not ok:
+            raise ValueError(f"{name} must be finite and {'>' if strict else '>='} {low:g}, got {value}")
+
+
+@dataclass(frozen=True)
+class NmpcSettings:
+    """The tracking problem and its use in closed loop (``--set nmpc.KEY=VALUE``)."""
+
+    horizon: int = 20
+    """Prediction horizon N in samples."""
+    q_output: float = 1.0
+    """Weight on the squared tracking error of each predicted output."""
+    r_rate: float = 0.3
+    """Weight on the squared input change per sample (damps valve chatter from sensor noise)."""
+    r_input: float = 0.0
+    """Weight on the squared deviation of the input from the inverse-model input."""
+    solver: str = "ipopt"
+    """Solver variant, one of :data:`SOLVERS`; its settings are ``solver.<name>``."""
+    preview: bool = True
+    """Use the known future reference over the horizon; false holds the current one."""
+    warm_start: str = "inverse"
+    """Initial guess at start-up, after a reference jump and after a failure: 'inverse',
+    'shift' (previous plan only, the last input at start) or 'cold' (zeros every step)."""
+
+    def __post_init__(self):
+        if self.horizon < 2:
+            raise ValueError(f"horizon must be >= 2, got {self.horizon}")
+        if self.solver not in SOLVERS:
+            raise ValueError(f"solver {self.solver!r} is unknown; allowed: {', '.join(SOLVERS)}")
+        if self.warm_start not in WARM_STARTS:
+            raise ValueError(f"warm_start {self.warm_start!r} is unknown; allowed: {', '.join(WARM_STARTS)}")
+        _check_finite(self, ("r_rate", "r_input"))
+        _check_finite(self, ("q_output",), strict=True)
+
+
+@dataclass(frozen=True)
+class InputBounds:
+    """What the actuator accepts: ``lower <= u <= upper`` and ``|u_k − u_{k−1}| <= rate``."""
+
+    lower: float
+    """Smallest input."""
+    upper: float
+    """Largest input."""
+    rate: float = np.inf
+    """Largest change per sample (``inf``: none)."""
+
+    def __post_init__(self):
+        if not (np.isfinite(self.lower) and np.isfinite(self.upper) and self.lower < self.upper):
+            raise ValueError(f"need finite lower < upper, got {self.lower}, {self.upper}")
+        if not self.rate > 0:
+            raise ValueError(f"rate must be > 0 (inf for none), got {self.rate}")
+
+    def clip(self, u: float, last: float | None = None) -> float:
+        """``u`` moved inside the bounds (and within ``rate`` of ``last``, if given)."""
+        if last is not None:
+            u = float(np.clip(u, last - self.rate, last + self.rate))
+        return float(np.clip(u, self.lower, self.upper))
+
+
+@dataclass(frozen=True)
+class NlpSettings:
+    """IPOPT or CasADi's sqpmethod (``--set solver.ipopt.KEY=VALUE``, ``solver.sqp.*``)."""
+
+    max_iter: int = 100
+    """Iteration limit per sample."""
+    tol: float = 1e-6
+    """Convergence tolerance."""
+    warm_multipliers: bool = False
+    """Also start from the previous solve's multipliers (IPOPT: warm_start_init_point)."""
+    options: dict[str, Any] = field(default_factory=dict)
+    """Extra options passed to the solver as they are: IPOPT's own names for ``ipopt``
+    (``mu_strategy``), sqpmethod's for ``sqp`` (``hessian_approximation``)."""
+
+    def __post_init__(self):
+        if self.max_iter < 1:
+            raise ValueError(f"max_iter must be >= 1, got {self.max_iter}")
+        _check_finite(self, ("tol",), strict=True)
+        if not isinstance(self.options, dict) or not all(isinstance(k, str) for k in self.options):
+            raise ValueError(f"options must map option names to values, got {self.options!r}")
+
+
+@dataclass(frozen=True)
+class GaussNewtonSettings:
+    """Gauss–Newton SQP to convergence, single-shooting problems (``--set solver.gn.KEY=VALUE``)."""
+
+    max_iter: int = 100
+    """Iteration limit per sample."""
+    tol: float = 1e-6
+    """Stop when the step is below ``tol·(1 + max|u|)``."""
+
+    def __post_init__(self):
+        if self.max_iter < 1:
+            raise ValueError(f"max_iter must be >= 1, got {self.max_iter}")
+        _check_finite(self, ("tol",), strict=True)
+
+
+@dataclass(frozen=True)
+class RtiSettings:
+    """Real-time iteration, ``rti`` and ``rti-c`` (``--set solver.rti.KEY=VALUE``)."""
+
+    iterations: int = 1
+    """Gauss–Newton steps per sample (1 is the classic real-time iteration)."""
+    condensed: bool = True
+    """Multiple-shooting problems: eliminate the states by a rollout inside the step, so the
+    QP has the N inputs only and the step backtracks on the cost; false: the QP over states
+    and inputs with the shooting gaps as constraints, full step (qrqp). Single-shooting
+    problems are condensed by construction and reject false."""
+    qp_iterations: int = 30
+    """Interior-point iterations of the condensed step's QP (fixed: real time)."""
+
+    def __post_init__(self):
+        if self.iterations < 1:
+            raise ValueError(f"iterations must be >= 1, got {self.iterations}")
+        if self.qp_iterations < 10:
+            raise ValueError(f"qp_iterations must be >= 10, got {self.qp_iterations}")
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """Every solver's settings; ``nmpc.solver`` picks the one in use (``--set solver.NAME.KEY=VALUE``)."""
+
+    ipopt: NlpSettings = NlpSettings()
+    """``ipopt``."""
+    sqp: NlpSettings = NlpSettings()
+    """``sqp``."""
+    gn: GaussNewtonSettings = GaussNewtonSettings()
+    """``gn``."""
+    rti: RtiSettings = RtiSettings()
+    """``rti`` and ``rti-c``."""
+
+    def uniform(self, **changes) -> SolverSettings:
+        """The same ``changes`` (``max_iter``, ``tol``, ...) applied to every solver that has them."""
+        from dataclasses import fields, replace
+        out = {}
+        for f in fields(self):
+            group = getattr(self, f.name)
+            names = {g.name for g in fields(group)}
+            out[f.name] = replace(group, **{k: v for k, v in changes.items() if k in names})
+        return SolverSettings(**out)

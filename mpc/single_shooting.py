@@ -1,0 +1,151 @@
+"""Single-shooting tracking problem for predictions that are not a Markov step.
+
+Some predictions need more than the current state: the FCKP creep couples every predicted
+sample to all earlier ones in the horizon (the Grünwald–Letnikov sum). Such a model is given
+as a whole-horizon CasADi function ``predict(p, U) -> Y`` (``p``: state, disturbance, history
+terms, anything the caller fixes; ``U``: the N inputs; ``Y``: the N predicted outputs), and the
+NLP has only the inputs as unknowns.
+"""
+
+from __future__ import annotations
+
+import time
+
+import casadi as ca
+import numpy as np
+from hystmpc.mpc.problem import Solution, TrackingProblem
+from hystmpc.mpc.rti import compile_function, rti_function
+from hystmpc.mpc.settings import InputBounds, NmpcSettings, SolverSettings
+
+
+class SingleShootingProblem(TrackingProblem):
+    """Minimise Σ q (y_k − r_k)² + r_rate Δu² + r_input (u − u_ff)² over the inputs only.
+
+    Subject to the input bounds and ``|u_k − u_{k−1}| <= rate``. The condition is the
+    ``p`` of ``predict``.
+
+    Parameters
+    ----------
+    predict : casadi.Function
+        ``(p, U) -> Y`` with ``U`` and ``Y`` of length ``settings.horizon``.
+    settings : NmpcSettings
+        Horizon, weights, solver (``ipopt``, ``sqp``, ``gn``, ``rti``, ``rti-c``).
+    bounds : InputBounds
+        Input bounds and largest change per sample.
+    solvers : SolverSettings
+        Settings of every solver (``solver.rti.condensed=false`` does not apply).
+    """
+
+    def __init__(self, predict: ca.Function, settings: NmpcSettings, bounds: InputBounds,
+                 solvers: SolverSettings | None = None):
+        N = settings.horizon
+        if predict.size1_in(1) != N or predict.size1_out(0) != N:
+            raise ValueError(f"predict must map {N} inputs to {N} outputs, "
+                             f"got {predict.size1_in(1)} → {predict.size1_out(0)}")
+        solvers = solvers or SolverSettings()
+        if not solvers.rti.condensed:
+            raise ValueError("solver.rti.condensed=false needs a multiple-shooting problem; a single-shooting "
+                             "problem has the inputs as its only unknowns")
+        super().__init__(settings, bounds, solvers, predict.size1_in(0))
+        self.predict = predict
+        U = ca.SX.sym("U", N)
+        p = ca.SX.sym("p", self.n_condition)
+        u_prev = ca.SX.sym("u_prev")
+        ref = ca.SX.sym("ref", N)
+        u_ff = ca.SX.sym("u_ff", N)
+        y = predict(p, U)
+        du = U - ca.vertcat(u_prev, U[:-1])
+        rate_bounded = np.isfinite(self.du_max)
+        self._rate_bounded = rate_bounded
+        n_g = N if rate_bounded else 0
+        self._bounds = {"lbx": np.full(N, self.u_min), "ubx": np.full(N, self.u_max),
+                        "lbg": np.full(n_g, -self.du_max), "ubg": np.full(n_g, self.du_max)}
+        params = ca.vertcat(p, u_prev, ref, u_ff)
+        if settings.solver in ("gn", "rti", "rti-c"):  # Gauss–Newton: the cost as a sum of squares
+            residual = ca.vertcat(np.sqrt(settings.q_output) * (y - ref), np.sqrt(settings.r_rate) * du,
+                                  np.sqrt(settings.r_input) * (U - u_ff))
+            if settings.solver == "gn":
+                self._build_gauss_newton(U, params, residual)
+            else:
+                self._build_rti(U, params, residual, du)
+            return
+        cost = (settings.q_output * ca.sumsqr(y - ref) + settings.r_rate * ca.sumsqr(du)
+                + settings.r_input * ca.sumsqr(U - u_ff))
+        self._uses_nlp_solver({"x": U, "f": cost, "g": du if rate_bounded else ca.SX(0, 1), "p": params})
+
+    def _build_gauss_newton(self, U, params, residual) -> None:
+        N = self.horizon
+        J = ca.jacobian(residual, U)
+        self._gn_eval = ca.Function("gn_eval", [U, params], [residual, J])
+        H = ca.Sparsity.dense(N, N)
+        A = ca.DM(np.eye(N) - np.eye(N, k=-1)) if self._rate_bounded else ca.DM(0, N)
+        self._A = np.asarray(A)
+        self._qp = ca.conic("gn_qp", "qrqp", {"h": H, "a": ca.DM(A).sparsity()},
+                            {"print_iter": False, "print_header": False, "error_on_fail": False})
+
+    def _build_rti(self, U, params, residual, du) -> None:
+        """One Gauss–Newton step per sample as one Function (``rti``), compiled for ``rti-c``."""
+        residual = ca.Function("residual", [U, params], [residual])
+        constraints = ca.Function("constraints", [U, params], [du if self._rate_bounded else ca.SX(0, 1)])
+        b = self._bounds
+        # the constraints are linear in U, so a shortened step stays feasible: backtrack as gn does
+        self.rti = rti_function(residual, constraints, b["lbg"], b["ubg"], b["lbx"], b["ubx"],
+                                step_lengths=(0.5, 0.25, 0.125))
+        if self.settings.solver == "rti-c":
+            self.rti = compile_function(self.rti)
+
+    def _solve_gauss_newton(self, u, p):
+        """Gauss–Newton SQP: QP on JᵀJ, backtracking on the cost; returns (u, ok, status, iters)."""
+        gn, N = self.solvers.gn, self.horizon
+        u_prev = p[self.n_condition]
+        res, J = (np.asarray(v) for v in self._gn_eval(u, p))
+        res = res.ravel()
+        cost = float(res @ res)
+        for it in range(1, gn.max_iter + 1):
+            H = J.T @ J + 1e-10 * np.eye(N)
+            g = J.T @ res
+            args = {"h": H, "g": g, "lbx": self._bounds["lbx"] - u, "ubx": self._bounds["ubx"] - u}
+            if self._rate_bounded:
+                du = u - np.concatenate(([u_prev], u[:-1]))
+                args.update(a=self._A, lba=self._bounds["lbg"] - du, uba=self._bounds["ubg"] - du)
+            sol = self._qp(**args)
+            step = np.asarray(sol["x"]).ravel()
+            if not np.all(np.isfinite(step)):
+                return u, False, "QP_Failed", it
+            t = 1.0
+            while t > 1e-3:
+                trial = u + t * step
+                res_t, J_t = (np.asarray(v) for v in self._gn_eval(trial, p))
+                cost_t = float(res_t.ravel() @ res_t.ravel())
+                if cost_t <= cost:
+                    break
+                t *= 0.5
+            else:
+                return u, True, "Solve_Succeeded", it  # no descent left: stationary
+            u, res, J, cost = trial, res_t.ravel(), J_t, cost_t
+            if np.max(np.abs(t * step)) <= gn.tol * (1.0 + np.max(np.abs(u))):
+                return u, True, "Solve_Succeeded", it
+        return u, False, "Maximum_Iterations_Exceeded", gn.max_iter
+
+    def solve(self, condition, u_prev: float, ref, u_guess, x_guess=None, u_ff=None) -> Solution:
+        """Solve for the references ``ref`` (r_{k+1..k+N}) from ``condition`` (the ``p`` of ``predict``).
+
+        ``x_guess`` is not used: the inputs are the only unknowns.
+        """
+        N = self.horizon
+        u_guess = np.clip(np.asarray(u_guess, float).ravel(), self.u_min, self.u_max)
+        u_ff = u_guess if u_ff is None else np.asarray(u_ff, float).ravel()
+        p = self._parameters(condition, u_prev, ref, u_ff)
+        if self.rti is not None:  # backtracking keeps feasibility only from a feasible start
+            return self._solve_rti(self.feasible_start(u_guess, u_prev), p,
+                                   lambda w, finite: (w.reshape(N, 1), None))
+        if self.settings.solver == "gn":
+            start = time.perf_counter()
+            u, success, status, iterations = self._solve_gauss_newton(u_guess, p)
+            elapsed = time.perf_counter() - start
+            success = success and bool(np.all(np.isfinite(u)))
+            return Solution(u_plan=u.reshape(N, 1), x_plan=None, success=success, status=status,
+                            iterations=iterations, solve_time=elapsed)
+        u, success, status, iterations, elapsed = self._solve_nlp({"x0": u_guess, "p": p, **self._bounds}, warm=True)
+        return Solution(u_plan=u.reshape(N, 1), x_plan=None, success=success, status=status,
+                        iterations=iterations, solve_time=elapsed)

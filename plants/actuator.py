@@ -1,0 +1,114 @@
+"""A simulated actuator from any hysteresis model and dynamics: the truth for your own actuator.
+
+:class:`HysteresisActuator` runs the *exact*, non-smooth hysteresis model with the same
+:class:`~hystmpc.models.prediction.Dynamics` the prediction model is built from (written
+with plain arithmetic, its callables take NumPy values too), a dead time, sensor noise
+and the input's physical bounds. Give it other parameters than the controller's model
+(a mismatch) so that the NMPC never runs on its own model.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from hystmpc.models.base import HysteresisModel
+from hystmpc.models.integrators import rk4
+from hystmpc.models.prediction import Dynamics
+from hystmpc.plants.base import Measurement
+
+
+class HysteresisActuator:
+    """Exact hysteresis + dynamics + dead time + sensor noise.
+
+    Parameters
+    ----------
+    hysteresis : HysteresisModel
+        The true hysteresis (its exact ``step`` runs).
+    sample_period : float
+        Sample period (s); the input is held over it.
+    dynamics : Dynamics, optional
+        The true dynamics (None: the output is the hysteresis output).
+    delay_samples : int
+        Dead time between the input and the hysteresis (input-driven) or dynamics.
+    noise : float or dict
+        Standard deviation of the sensor noise: one value for every sensor, or per sensor
+        name (``y`` is the measured output).
+    input_bounds : tuple of float
+        The actuator saturates its input there.
+    substeps : int
+        RK4 steps per sample for continuous dynamics (a state-driven hysteresis steps after
+        each).
+    rest_input : float
+        Input at rest before the first sample.
+    """
+
+    def __init__(self, hysteresis: HysteresisModel, sample_period: float, dynamics: Dynamics | None = None,
+                 delay_samples: int = 0, noise: float | dict = 0.0,
+                 input_bounds: tuple[float, float] = (-np.inf, np.inf), substeps: int = 10,
+                 rest_input: float = 0.0):
+        if not (np.isfinite(sample_period) and sample_period > 0):
+            raise ValueError(f"sample_period must be finite and > 0, got {sample_period}")
+        if delay_samples < 0 or substeps < 1:
+            raise ValueError(f"need delay_samples >= 0 and substeps >= 1, got {delay_samples}, {substeps}")
+        self.hysteresis, self.dynamics = hysteresis, dynamics or Dynamics()
+        self._sample_period, self.delay_samples, self.substeps = float(sample_period), delay_samples, substeps
+        names = self.dynamics.sensor_names
+        self.noise = {n: float(noise.get(n, 0.0) if isinstance(noise, dict) else noise) for n in names}
+        if any(not (np.isfinite(v) and v >= 0) for v in self.noise.values()):
+            raise ValueError(f"noise must be finite and >= 0, got {noise}")
+        self.input_bounds = (float(input_bounds[0]), float(input_bounds[1]))
+        self.rest_input = float(rest_input)
+        self.reset(0)
+
+    @property
+    def sample_period(self) -> float:
+        """Sample period (s)."""
+        return self._sample_period
+
+    def reset(self, seed: int) -> Measurement:
+        """At rest at ``rest_input``: relaxed hysteresis, dynamics at zero; seed the noise."""
+        self._rng = np.random.default_rng(seed)
+        self._x = np.zeros(len(self.dynamics.state_names))
+        self._hys = self.hysteresis.initial_state(self.rest_input)
+        self._queue = [self.rest_input] * self.delay_samples
+        self._u = self.rest_input
+        self._t = 0.0
+        return self._measure()
+
+    def _rhs(self, u, h):
+        rhs = self.dynamics.rhs
+        return lambda x, t: np.array([float(v) for v in rhs(x, u, h, 0.0)])
+
+    def step(self, u: float) -> Measurement:
+        """Apply the input ``u`` for one sample (saturated at the input bounds)."""
+        if not np.isfinite(u):
+            raise ValueError(f"plant input must be finite, got {u}")
+        self._u = float(np.clip(u, *self.input_bounds))
+        self._queue.append(self._u)
+        u_in = self._queue.pop(0)
+        dyn, hys = self.dynamics, self.hysteresis
+        if dyn.hysteresis_input is None:
+            self._hys, h = hys.step(self._hys, u_in)
+            if dyn.state_names:
+                self._x = self._advance(u_in, h, self.substeps)
+        else:
+            for _ in range(1 if dyn.discrete else self.substeps):
+                self._x = self._advance(u_in, hys.output(self._hys), 1)
+                self._hys, _ = hys.step(self._hys, float(dyn.hysteresis_input(self._x, u_in)))
+        self._t += self._sample_period
+        return self._measure()
+
+    def _advance(self, u_in: float, h: float, substeps: int) -> np.ndarray:
+        if self.dynamics.discrete:
+            return np.array([float(v) for v in self.dynamics.rhs(self._x, u_in, h, 0.0)])
+        return rk4(self._rhs(u_in, h), self._x, self._sample_period / self.substeps, substeps)
+
+    def _measure(self) -> Measurement:
+        dyn = self.dynamics
+        h = self.hysteresis.output(self._hys)
+        y = float(dyn.output(self._x, h))
+        values = [y] if dyn.measure is None else [float(v) for v in dyn.measure(self._x, h, y)]
+        noisy = {n: v + self.noise[n] * self._rng.standard_normal() for n, v in zip(dyn.sensor_names, values,
+                                                                                      strict=True)}
+        return Measurement(t=self._t, y=noisy.get("y", y), sensors={n: v for n, v in noisy.items() if n != "y"},
+                           truth={"output": y, "hysteresis_output": float(h), "input": self._u,
+                                  **{name: float(v) for name, v in zip(dyn.state_names, self._x, strict=True)}})
