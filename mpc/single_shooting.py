@@ -101,6 +101,8 @@ class SingleShootingProblem(TrackingProblem):
         res, J = (np.asarray(v) for v in self._gn_eval(u, p))
         res = res.ravel()
         cost = float(res @ res)
+        if not np.isfinite(cost):
+            return u, False, "Non_Finite_Cost", 0
         for it in range(1, gn.max_iter + 1):
             H = J.T @ J + 1e-10 * np.eye(N)
             g = J.T @ res
@@ -120,8 +122,9 @@ class SingleShootingProblem(TrackingProblem):
                 if cost_t <= cost:
                     break
                 t *= 0.5
-            else:
-                return u, True, "Solve_Succeeded", it  # no descent left: stationary
+            else:  # no descent left: stationary, unless the cost stopped being a number
+                finite = np.isfinite(cost_t)
+                return u, bool(finite), "Solve_Succeeded" if finite else "Non_Finite_Cost", it
             u, res, J, cost = trial, res_t.ravel(), J_t, cost_t
             if np.max(np.abs(t * step)) <= gn.tol * (1.0 + np.max(np.abs(u))):
                 return u, True, "Solve_Succeeded", it
