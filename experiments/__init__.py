@@ -1,1 +1,23 @@
-"""Benches, scenarios, baseline controllers, the runner, reports and the ``hystmpc`` CLI."""
+"""Closed loops, baselines, benches, reports and the ``hystmpc`` command line.
+
+* :func:`simulate` runs any plant with any controller along a reference; :class:`RunResult`
+  holds the trajectories, metrics, ``to_json()`` and ``plot()``.
+* Baselines for any actuator: :class:`PidController`, :func:`inverse_feedforward_pid`,
+  :class:`InverseFeedforward`, :class:`HysteresisCompensation`.
+* The four papers' benches: :func:`get_bench` (``pam``, ``compliant``, ``reluctance``, ``dea``).
+"""
+
+from hystmpc.experiments.baselines import (
+    HysteresisCompensation,
+    InverseFeedforward,
+    PidController,
+    PidGains,
+    inverse_feedforward_pid,
+)
+from hystmpc.experiments.bench import Bench, ControllerSpec
+from hystmpc.experiments.benches import BENCH_NAMES, get_bench
+from hystmpc.experiments.runner import Controller, Labels, RunResult, Scenario, simulate
+
+__all__ = ["BENCH_NAMES", "Bench", "Controller", "ControllerSpec", "HysteresisCompensation", "InverseFeedforward",
+           "Labels", "PidController", "PidGains", "RunResult", "Scenario", "get_bench", "inverse_feedforward_pid",
+           "simulate"]

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
+
 from hystmpc.models.base import HysteresisModel
 
 

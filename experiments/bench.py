@@ -14,8 +14,19 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
 from hystmpc.experiments.config import apply_overrides
 from hystmpc.experiments.runner import Controller, Labels, RunResult, Scenario, simulate
+
+MULTIPLE_SHOOTING = {f"solver.gn.{key}": "solver gn solves single-shooting problems; this bench's NMPC is "
+                     "multiple shooting (use ipopt, sqp, rti or rti-c)" for key in ("max_iter", "tol")}
+"""Keys a bench with a multiple-shooting NMPC cannot use."""
+SINGLE_SHOOTING = {"solver.rti.condensed": "this bench's NMPC is single shooting: its RTI step has the inputs "
+                                           "as its only unknowns",
+                   "solver.rti.qp_iterations": "this bench's RTI step solves its box-bounded QP with qrqp (an active "
+                                               "set, exact there); the interior-point QP is the multiple-shooting "
+                                               "step's"}
+"""Keys a bench with a single-shooting NMPC cannot use."""
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import casadi as ca
 import numpy as np
+
 from hystmpc.experiments.bench import Bench
 from hystmpc.mpc.rti import _accept_last_qp_iterate
 

@@ -8,6 +8,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+
 from hystmpc.experiments.runner import RunResult
 
 SCHEMA = "hystmpc.results/1"

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
+
 from hystmpc.experiments.metrics import step_metrics, tracking_metrics
 from hystmpc.plants.base import Measurement, Plant
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
+
 from hystmpc.models.base import SteppedModel, smooth_function, symbolic
 from hystmpc.models.fractional import GrunwaldLetnikov
 from hystmpc.models.kp import KrasnoselskiiPokrovskii, paper_density, threshold_grid

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
+
 from hystmpc.models.base import SteppedModel, check_smoothing, smooth_function, symbolic
 from hystmpc.models.lambertw import lambertw, lambertw_expr
 from hystmpc.models.smooth import smooth_max, smooth_min

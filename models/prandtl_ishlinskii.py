@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
+
 from hystmpc.models.base import SteppedModel, check_smoothing, smooth_function, symbolic
 from hystmpc.models.maxwell_slip import MaxwellSlip
 

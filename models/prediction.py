@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
+
 from hystmpc.models.base import HysteresisModel
 from hystmpc.models.fractional import gl_weights
 from hystmpc.models.integrators import rk4

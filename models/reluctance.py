@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
 from hystmpc.models.parametric import ParametricHysteresis, identify_major_loop
 from hystmpc.models.prediction import Dynamics, PredictionModel, build_prediction_model
 from hystmpc.models.smooth import smooth_max

@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+
 from hystmpc.models.prediction import CreepPredictionModel, PredictionModel
 from hystmpc.mpc.estimator import DisturbanceEKF
 from hystmpc.mpc.multiple_shooting import MultipleShootingProblem

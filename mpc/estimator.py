@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import casadi as ca
 import numpy as np
+
 from hystmpc.models.prediction import PredictionModel
 
 

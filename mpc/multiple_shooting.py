@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import casadi as ca
 import numpy as np
+
 from hystmpc.models.prediction import PredictionModel
 from hystmpc.mpc.problem import Solution, TrackingProblem
 from hystmpc.mpc.rti import compile_function, rti_function

@@ -17,6 +17,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+
 from hystmpc.models.fractional import gl_weights
 from hystmpc.models.prediction import CreepPredictionModel, InputMemory, PredictionModel
 from hystmpc.mpc.estimator import DisturbanceEKF

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
+
 from hystmpc.mpc.rti import QP_TOLERANCE, feasible_guess, rti_steps
 from hystmpc.mpc.settings import InputBounds, NlpSettings, NmpcSettings, SolverSettings
 
@@ -58,8 +59,9 @@ def nlp_solver(name: str, nlp: dict, solver: str, settings: NlpSettings) -> ca.F
         opts.update(s.options)
     try:
         return ca.nlpsol(name, "ipopt" if solver == "ipopt" else "sqpmethod", nlp, opts)
-    except RuntimeError as exc:
-        raise ValueError(f"solver.{solver}.options: {str(exc).strip().splitlines()[-1]}") from None
+    except RuntimeError as exc:  # keep the line that names the option, without CasADi's source location
+        lines = [line for line in str(exc).splitlines() if "option" in line.lower()] or str(exc).splitlines()
+        raise ValueError(f"solver.{solver}.options: {lines[0].split(': ', 1)[-1].strip()}") from None
 
 
 class TrackingProblem:

@@ -13,6 +13,7 @@ import time
 
 import casadi as ca
 import numpy as np
+
 from hystmpc.mpc.problem import Solution, TrackingProblem
 from hystmpc.mpc.rti import compile_function, rti_function
 from hystmpc.mpc.settings import InputBounds, NmpcSettings, SolverSettings

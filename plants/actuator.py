@@ -10,6 +10,7 @@ and the input's physical bounds. Give it other parameters than the controller's 
 from __future__ import annotations
 
 import numpy as np
+
 from hystmpc.models.base import HysteresisModel
 from hystmpc.models.integrators import rk4
 from hystmpc.models.prediction import Dynamics

@@ -33,3 +33,15 @@ class Plant(Protocol):
 
     def step(self, u: float) -> Measurement:
         """Apply ``u`` for one sample; the measurement at the end of it."""
+
+
+class ParametrisedPlant:
+    """Mixin for a plant dataclass whose ``params`` hold its ``sample_period``: built at rest."""
+
+    def __post_init__(self):
+        self.reset(0)
+
+    @property
+    def sample_period(self) -> float:
+        """Control sample period (s)."""
+        return self.params.sample_period

@@ -19,9 +19,10 @@ from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
+
 from hystmpc.models.power_function import PowerFunctionHysteresis, VirtualDeformation
 from hystmpc.models.prediction import Dynamics, PredictionModel, build_prediction_model
-from hystmpc.plants.base import Measurement
+from hystmpc.plants.base import Measurement, ParametrisedPlant
 
 
 @dataclass(frozen=True)
@@ -70,18 +71,10 @@ class CompliantParams:
 
 
 @dataclass
-class CompliantActuator:
+class CompliantActuator(ParametrisedPlant):
     """Simulated compliant actuator; input: motor angle command (rad); output: torque (N m)."""
 
     params: CompliantParams = field(default_factory=CompliantParams)
-
-    def __post_init__(self):
-        self.reset(0)
-
-    @property
-    def sample_period(self) -> float:
-        """Control sample period (s)."""
-        return self.params.sample_period
 
     def reset(self, seed: int) -> Measurement:
         """Start at rest at zero torque on the ascending branch; seed the sensor noise."""

@@ -19,10 +19,11 @@ from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
+
 from hystmpc.models.fckp import Fckp, FckpParams
 from hystmpc.models.integrators import rk4
 from hystmpc.models.prediction import CreepPredictionModel, Dynamics, build_prediction_model
-from hystmpc.plants.base import Measurement
+from hystmpc.plants.base import Measurement, ParametrisedPlant
 
 
 @dataclass(frozen=True)
@@ -106,19 +107,14 @@ def disturbance(t, amplitude: float, omega: float):
 
 
 @dataclass
-class DeaActuator:
+class DeaActuator(ParametrisedPlant):
     """Simulated DEA; input: amplifier command (V, 0–10); output: displacement (mm)."""
 
     params: DeaParams = field(default_factory=DeaParams)
 
     def __post_init__(self):
         self.model = Fckp(self.params.fckp)
-        self.reset(0)
-
-    @property
-    def sample_period(self) -> float:
-        """Control sample period (s)."""
-        return self.params.sample_period
+        super().__post_init__()
 
     def reset(self, seed: int) -> Measurement:
         """At rest at zero volts, demagnetised, empty creep memory; seed the sensor noise."""

@@ -20,10 +20,11 @@ from dataclasses import dataclass, field, replace
 
 import casadi as ca
 import numpy as np
+
 from hystmpc.models.integrators import rk4
 from hystmpc.models.maxwell_slip import MaxwellSlip
 from hystmpc.models.prediction import Dynamics, PredictionModel, build_prediction_model
-from hystmpc.plants.base import Measurement
+from hystmpc.plants.base import Measurement, ParametrisedPlant
 
 GRAVITY = 9.81
 DEG = np.pi / 180.0
@@ -190,18 +191,10 @@ def inverse_inputs(p: PamJointParams, x, d, refs) -> np.ndarray:
 
 
 @dataclass
-class PamJoint:
+class PamJoint(ParametrisedPlant):
     """Simulated antagonistic PAM joint; input: commanded Δp (bar); output: angle (deg)."""
 
     params: PamJointParams = field(default_factory=PamJointParams)
-
-    def __post_init__(self):
-        self.reset(0)
-
-    @property
-    def sample_period(self) -> float:
-        """Control sample period (s)."""
-        return self.params.sample_period
 
     def reset(self, seed: int) -> Measurement:
         """Start at rest at θ = 0 with relaxed hysteresis; seed the sensor noise."""

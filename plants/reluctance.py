@@ -18,8 +18,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+
 from hystmpc.models.parametric import ParametricHysteresis
-from hystmpc.plants.base import Measurement
+from hystmpc.plants.base import Measurement, ParametrisedPlant
 
 MU0 = 4e-7 * np.pi
 
@@ -80,7 +81,7 @@ def static_force(p: ReluctanceParams, i_eff, gap: float):
 
 
 @dataclass
-class ReluctanceActuator:
+class ReluctanceActuator(ParametrisedPlant):
     """Simulated actuator at a fixed air gap; input: current reference (A); output: force (N)."""
 
     params: ReluctanceParams = field(default_factory=ReluctanceParams)
@@ -94,12 +95,7 @@ class ReluctanceActuator:
         if not 0.5e-3 <= self.gap <= 3e-3:
             raise ValueError(f"gap must be in [0.5, 3] mm, got {self.gap * 1e3:g} mm")
         self.hysteresis = ParametricHysteresis(self.params.p1, self.params.p2 / self.gap)
-        self.reset(0)
-
-    @property
-    def sample_period(self) -> float:
-        """Sample period (s)."""
-        return self.params.sample_period
+        super().__post_init__()
 
     def reset(self, seed: int) -> Measurement:
         """Demagnetised at zero current; seed the force noise."""

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from hystmpc.models.maxwell_slip import MaxwellSlip
 
 

@@ -5,6 +5,7 @@ import subprocess
 import sys
 
 import pytest
+
 from hystmpc.experiments.cli import main
 from hystmpc.experiments.report import validate_document
 

@@ -5,6 +5,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+
 from hystmpc.experiments.benches.compliant import BENCH, NOMINAL, PAPER_TABLE_IV, PLANT
 from hystmpc.experiments.cli import main
 from hystmpc.experiments.report import validate_document

@@ -4,6 +4,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+
 from hystmpc.experiments.benches.dea import BENCH, NOMINAL, PAPER_TABLE_2
 from hystmpc.models.fckp import Fckp
 from hystmpc.plants.dea import DeaActuator, prediction_model

@@ -2,10 +2,11 @@
 
 import numpy as np
 import pytest
+from scipy.special import gamma
+
 from hystmpc.models.fckp import Fckp, FckpParams
 from hystmpc.models.fractional import GrunwaldLetnikov, gl_apply, gl_weights
 from hystmpc.models.kp import KrasnoselskiiPokrovskii, threshold_grid
-from scipy.special import gamma
 
 
 def _fig2_kernel() -> KrasnoselskiiPokrovskii:

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 import pytest
+
 from hystmpc.models import (
     Fckp,
     HysteresisModel,

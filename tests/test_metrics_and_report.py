@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from hystmpc.experiments.benches.pam import BENCH
 from hystmpc.experiments.config import allowed_keys, apply_overrides
 from hystmpc.experiments.metrics import step_metrics, tracking_metrics

@@ -5,6 +5,7 @@ from dataclasses import replace
 import casadi as ca
 import numpy as np
 import pytest
+
 from hystmpc.experiments.benches.pam import BENCH, NOMINAL
 from hystmpc.experiments.runner import Scenario
 from hystmpc.mpc import NlpSettings, NmpcSettings, SolverSettings

@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pytest
+
 from hystmpc.experiments.benches.pam import BENCH
 from hystmpc.experiments.cli import main
 from hystmpc.experiments.report import validate_document

@@ -4,6 +4,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+
 from hystmpc.experiments.benches.pam import NOMINAL, PLANT
 from hystmpc.plants.pam_joint import PamJoint, PamJointParams, constraint_pressure
 

@@ -3,9 +3,10 @@
 import casadi as ca
 import numpy as np
 import pytest
+from scipy.special import lambertw as scipy_lambertw
+
 from hystmpc.models.lambertw import INV_E, lambertw, lambertw_function
 from hystmpc.models.parametric import ParametricHysteresis, identify_major_loop, major_loop
-from scipy.special import lambertw as scipy_lambertw
 
 EPS = np.finfo(float).eps
 E_CORE = ParametricHysteresis(p1=0.0071, p2=0.0014 / 1.5e-3)  # katalenic2013 Table 2 at g = 1.5 mm

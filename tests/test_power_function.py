@@ -3,6 +3,7 @@
 import casadi as ca
 import numpy as np
 import pytest
+
 from hystmpc.models.power_function import (
     ASCENDING_POINTS,
     DESCENDING_POINTS,

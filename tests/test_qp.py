@@ -5,6 +5,7 @@ import numpy as np
 import osqp
 import pytest
 import scipy.sparse as sp
+
 from hystmpc.mpc.qp import interior_point_qp
 from hystmpc.mpc.rti import compile_function
 

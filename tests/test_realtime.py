@@ -3,6 +3,7 @@
 import json
 
 import pytest
+
 from hystmpc.experiments.benches import get_bench
 from hystmpc.experiments.cli import main
 from hystmpc.experiments.realtime import codegen
@@ -64,6 +65,7 @@ def test_do_mpc_solves_the_same_problem():
 def test_rti_step_lengths_take_the_best_of_the_shortened_steps():
     """An overshooting Gauss–Newton step (r = w³ − 1 from w = 0.1) is cut back to the best trial."""
     import casadi as ca
+
     from hystmpc.mpc.rti import rti_function
     w, p = ca.SX.sym("w"), ca.SX.sym("p")
     residual = ca.Function("r", [w, p], [w**3 - 1])
@@ -81,6 +83,7 @@ def test_repeated_rti_steps_reach_the_converged_solution_or_say_they_failed(cond
     step's qrqp gets this QP wrong, and the step reports it instead of passing it on."""
     import casadi as ca
     import numpy as np
+
     from hystmpc.models import PredictionModel
     from hystmpc.mpc import InputBounds, MultipleShootingProblem, NlpSettings, NmpcSettings, RtiSettings, SolverSettings
     x, u, d = ca.SX.sym("x", 2), ca.SX.sym("u"), ca.SX.sym("d")
@@ -114,6 +117,7 @@ def test_condensed_rti_step_without_a_rate_bound():
     """An unbounded rate leaves only the input bounds in the interior-point QP."""
     import casadi as ca
     import numpy as np
+
     from hystmpc.models import PredictionModel
     from hystmpc.mpc import InputBounds, MultipleShootingProblem, NmpcSettings, RtiSettings, SolverSettings
     x, u, d = ca.SX.sym("x"), ca.SX.sym("u"), ca.SX.sym("d")
@@ -132,6 +136,7 @@ def test_condensed_rti_plan_keeps_the_rate_bound_from_an_infeasible_guess():
     before the step, so the backtracking's shortened steps keep the rate bound too."""
     import casadi as ca
     import numpy as np
+
     from hystmpc.models import PredictionModel
     from hystmpc.mpc import InputBounds, MultipleShootingProblem, NmpcSettings
     x, u, d = ca.SX.sym("x"), ca.SX.sym("u"), ca.SX.sym("d")

@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pytest
+
 from hystmpc.experiments.baselines import Replay
 from hystmpc.experiments.benches.reluctance import BENCH, identified_model, rig
 from hystmpc.experiments.cli import main

@@ -4,6 +4,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+
 from hystmpc.models.parametric import identify_major_loop
 from hystmpc.plants.reluctance import C_CORE, ReluctanceActuator, ReluctanceParams, major_loop_measurement, static_force
 

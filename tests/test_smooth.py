@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from hystmpc.models.smooth import smooth_abs, smooth_clip, smooth_max, smooth_min
 
 X = np.linspace(-5, 5, 20001)

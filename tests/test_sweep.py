@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
+
 from hystmpc.experiments.cli import main
 from hystmpc.experiments.sweep import (
     SweepSpec,

@@ -12,8 +12,9 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+
 from hystmpc.experiments.baselines import PidController, PidGains, inverse_feedforward_pid
-from hystmpc.experiments.bench import Bench, ControllerSpec
+from hystmpc.experiments.bench import MULTIPLE_SHOOTING, Bench, ControllerSpec
 from hystmpc.experiments.runner import Scenario
 from hystmpc.models.prediction import Smoothing
 from hystmpc.mpc import (
@@ -129,5 +130,5 @@ BENCH = Bench(
         "model.backlash": "the controllers' model has no backlash; it is the plant's (plant.backlash)",
         "model.substeps": "the prediction model integrates with 2 RK4 steps per sample; plant.substeps is the "
                           "plant's",
-    },
+    } | MULTIPLE_SHOOTING,
 )

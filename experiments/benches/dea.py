@@ -25,8 +25,9 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+
 from hystmpc.experiments.baselines import PidController, PidGains
-from hystmpc.experiments.bench import Bench, ControllerSpec
+from hystmpc.experiments.bench import SINGLE_SHOOTING, Bench, ControllerSpec
 from hystmpc.experiments.benches.dea_backstepping import Backstepping, BicSettings
 from hystmpc.experiments.benches.dea_linear_mpc import LinearMpc, LinearMpcSettings
 from hystmpc.experiments.runner import Scenario
@@ -187,5 +188,5 @@ BENCH = Bench(
            "model.disturbance": "the controllers' model has no d(t); it is the plant's (plant.disturbance), and "
                                 "the disturbance estimate takes it up",
            "model.substeps": "the prediction model integrates with 2 RK4 steps per sample; plant.substeps is the "
-                             "plant's"},
+                             "plant's"} | SINGLE_SHOOTING,
 )

@@ -12,8 +12,9 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+
 from hystmpc.experiments.baselines import HysteresisCompensation, PidController, PidGains
-from hystmpc.experiments.bench import Bench, ControllerSpec
+from hystmpc.experiments.bench import MULTIPLE_SHOOTING, Bench, ControllerSpec
 from hystmpc.experiments.runner import Scenario
 from hystmpc.models.prediction import Smoothing
 from hystmpc.mpc import DisturbanceEKF, InputBounds, NmpcController, NmpcSettings, SolverSettings, StateObserver
@@ -124,5 +125,5 @@ BENCH = Bench(
         "model.creep_time": MODEL_ONLY.format("creep (the disturbance estimate takes it up)", "creep_time"),
         "model.substeps": "the prediction model integrates with 2 RK4 steps per sample; plant.substeps is the "
                           "plant's",
-    },
+    } | MULTIPLE_SHOOTING,
 )

@@ -20,7 +20,8 @@ import functools
 from dataclasses import dataclass
 
 import numpy as np
-from hystmpc.experiments.bench import Bench, ControllerSpec
+
+from hystmpc.experiments.bench import MULTIPLE_SHOOTING, Bench, ControllerSpec
 from hystmpc.experiments.runner import Scenario
 from hystmpc.experiments.signals import smooth_path, staircase
 from hystmpc.models.prediction import Smoothing
@@ -230,5 +231,5 @@ BENCH = Bench(
     loop=("current", "force", "current [A]", "force [N]"),
     default_scenario="ramp-1.5mm",
     error_vs_reference=True,
-    fixed={"ecore.sample_period": SAMPLED, "ccore.sample_period": SAMPLED},
+    fixed={"ecore.sample_period": SAMPLED, "ccore.sample_period": SAMPLED} | MULTIPLE_SHOOTING,
 )
