@@ -128,7 +128,7 @@ class InverseFeedforward:
     ``h = steady_input(r)`` is the hysteresis output that holds the output at ``r`` at rest
     (default: ``r`` itself), ``v = hysteresis.inverse_step(h)`` the hysteresis input and
     ``u = input_of(v)`` the actuator input (default: ``v``). The inverse model's memory
-    follows its own inputs.
+    follows its own inputs; a target the model cannot reach holds the last input.
 
     Parameters
     ----------
@@ -148,12 +148,19 @@ class InverseFeedforward:
     def reset(self) -> None:
         """The inverse model at rest."""
         self._state = self.hysteresis.initial_state()
+        self._last = None
 
     def __call__(self, measurement, ref_window) -> float:
         r = float(ref_window[min(self.preview, len(ref_window) - 1)])
         target = r if self.steady_input is None else float(self.steady_input(r))
-        self._state, v = self.hysteresis.inverse_step(self._state, target)
-        return float(v if self.input_of is None else self.input_of(v))
+        try:
+            self._state, v = self.hysteresis.inverse_step(self._state, target)
+        except ValueError:  # beyond the model's reach: hold (the PID does the rest)
+            if self._last is None:
+                raise
+            return self._last
+        self._last = float(v if self.input_of is None else self.input_of(v))
+        return self._last
 
 
 class HysteresisCompensation:

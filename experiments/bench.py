@@ -114,6 +114,14 @@ class Bench:
         scenario = self.scenario(scenario) if isinstance(scenario, str) else scenario
         config = self.configure() if config is None else config
         if scenario.conditions:
+            from hystmpc.experiments.config import get_value
+            defaults = self.configure()
+            fixed = apply_overrides(defaults, list(scenario.conditions))
+            for condition in scenario.conditions:
+                key = condition.split("=", 1)[0]
+                if get_value(config, key) not in (get_value(defaults, key), get_value(fixed, key)):
+                    raise ValueError(f"{key}={get_value(config, key)} conflicts with scenario {scenario.name!r}, "
+                                     f"which fixes {condition}; use another reference for other conditions")
             config = apply_overrides(config, list(scenario.conditions))
         return Prepared(scenario, controller, config, self.build_plant(config),
                         self.build_controller(controller, config))
@@ -135,7 +143,7 @@ class Bench:
         duration : float, optional
             Override of the scenario's duration (s).
         progress : callable, optional
-            Called with the number of samples done after each sample.
+            Called with 1 after each sample.
         prepared : Prepared, optional
             What :meth:`prepare` gave for the same arguments (code-generation checks wrap
             its controller's solver first).

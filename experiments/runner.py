@@ -24,7 +24,8 @@ class Controller(Protocol):
     """Shape shared by every controller: ``reset()``, then ``step(measurement, ref_window)``.
 
     ``ref_window`` holds the reference at this sample and the next ``horizon`` ones.
-    Optionally a controller has ``predicted_output`` (its model's one-step-ahead
+    :func:`simulate` also takes a controller without ``horizon`` (then 0) or ``stats``;
+    optionally a controller has ``predicted_output`` (its model's one-step-ahead
     prediction of this sample's output, for the run's CSV).
     """
 
@@ -148,6 +149,13 @@ def reference_samples(reference, dt: float, duration: float | None = None) -> tu
     return dt * np.arange(n), values[:n]
 
 
+def _checked(t: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    ref = np.broadcast_to(np.asarray(ref, float), t.shape).copy()  # a constant reference is fine
+    if not np.all(np.isfinite(ref)):
+        raise ValueError(f"the reference is not finite at t = {t[~np.isfinite(ref)][0]:g} s")
+    return ref
+
+
 def simulate(plant: Plant, controller: Controller, reference, duration: float | None = None, seed: int = 0, *,
              name: str | None = None, scenario: str | None = None, labels: Labels = Labels(),
              progress: Callable[[int], Any] | None = None) -> RunResult:
@@ -177,8 +185,9 @@ def simulate(plant: Plant, controller: Controller, reference, duration: float | 
     t, ref = reference_samples(reference, dt, duration)
     if len(t) < 2:
         raise ValueError(f"the run needs at least 2 samples at {dt:g} s, got {len(t)}")
+    ref = _checked(t, ref)
     controller.reset()
-    horizon = controller.horizon
+    horizon = getattr(controller, "horizon", 0)
     ref_padded = np.concatenate((ref, np.full(horizon, ref[-1])))
     n = len(t)
     out, u_hist, pred, step_times = (np.empty(n) for _ in range(4))
@@ -209,4 +218,5 @@ def simulate(plant: Plant, controller: Controller, reference, duration: float | 
     return RunResult(scenario=scenario, controller=name or type(controller).__name__, seed=seed,
                      sample_period=dt, t=t, reference=ref, output=out, input=u_hist, predicted=pred,
                      truth={k: np.asarray(v) for k, v in truth.items()}, step_times=step_times,
-                     metrics=metrics, solver=controller.stats(), labels=labels)
+                     metrics=metrics, solver=controller.stats() if hasattr(controller, "stats") else None,
+                     labels=labels)

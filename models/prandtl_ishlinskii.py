@@ -9,8 +9,8 @@ A play operator of threshold ``r`` and weight ``p`` is a Maxwell-slip element of
 ``p`` and break-away level ``p·r`` seen from the other side: ``p·Play_r[u] = p·u − F``.
 So ``y = (p0 + Σp)·u − MS[u]`` and the model is built on :class:`MaxwellSlip`; its state is
 the Maxwell-slip state ``[u_last, F_1..F_n]`` (``F_i = p_i·(u_last − z_i)``, ``z_i`` the
-play outputs). Unlike Maxwell-slip, the output is unbounded and grows with slope at least
-``p0`` along any monotone path, so every target is reachable when ``p0 > 0``.
+play outputs). Unlike Maxwell-slip, the output is unbounded: once a move exceeds twice the
+largest threshold every play follows the input, so every target is reachable.
 
 A relaxed state (every ``F_i = 0``) is the virgin state: all plays centred on the input.
 """
@@ -36,8 +36,8 @@ class PrandtlIshlinskii(SteppedModel):
     """r_i > 0, input units."""
     weights: tuple[float, ...]
     """p_i > 0, output per input unit."""
-    elements: MaxwellSlip = field(init=False, repr=False, compare=False)
-    """The equivalent Maxwell-slip elements (k_i = p_i, w_i = p_i r_i)."""
+    elements: MaxwellSlip | None = field(init=False, repr=False, compare=False, default=None)
+    """The equivalent Maxwell-slip elements (k_i = p_i, w_i = p_i r_i); None without plays."""
 
     def __post_init__(self):
         object.__setattr__(self, "thresholds", tuple(float(r) for r in self.thresholds))
@@ -78,11 +78,6 @@ class PrandtlIshlinskii(SteppedModel):
         state = np.asarray(state, float)
         return float(self.gain * state[0] - np.sum(state[1:]))
 
-    def play_outputs(self, state) -> np.ndarray:
-        """The play operators' outputs ``z_i`` of a state."""
-        state = np.asarray(state, float)
-        return state[0] - state[1:] / np.asarray(self.weights)
-
     def step(self, state, u: float) -> tuple[np.ndarray, float]:
         """Exact step to input ``u``; returns ``(state, y)``."""
         if not self.weights:
@@ -108,10 +103,7 @@ class PrandtlIshlinskii(SteppedModel):
 
     def inverse_step(self, state, y_target: float) -> tuple[np.ndarray, float]:
         """The input that brings the output to ``y_target`` from ``state`` (exact: the output
-        is piecewise linear and monotone along a monotone input path), and the new state.
-
-        Needs ``linear_gain > 0`` or the target between the outputs the plays can reach.
-        """
+        is piecewise linear and monotone along a monotone input path), and the new state."""
         if not np.isfinite(y_target):
             raise ValueError(f"y_target must be finite, got {y_target}")
         if not self.weights:

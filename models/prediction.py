@@ -145,7 +145,9 @@ class InputMemory:
     """Samples of dead time before the hysteresis."""
     dynamics: PredictionModel | None
     """``x_dyn+ = step(x_dyn, h, d)`` driven by the hysteresis (and creep) output ``h``, with
-    the model's output and sensors; None when the model has no dynamic states."""
+    the model's output and sensors; None when the dynamics cannot be split off (no dynamic
+    states, the input acting on them besides the hysteresis, or the output reading ``h``):
+    an estimator then runs on the whole model with the exact states held."""
     creep_order: float = 0.0
     """α of the Grünwald–Letnikov creep integral between hysteresis and dynamics (0: none)."""
     steady_input: Callable | None = None
@@ -153,10 +155,8 @@ class InputMemory:
     disturbance: str = "output"
     """Where ``d`` enters (one of :data:`DISTURBANCES` but ``auto``)."""
 
-    @property
-    def n_dynamic(self) -> int:
-        """Number of dynamic states (estimated)."""
-        return 0 if self.dynamics is None else self.dynamics.nx
+    n_dynamic: int = 0
+    """Number of dynamic states (the model's first states; the estimated ones)."""
 
 
 @dataclass(frozen=True)
@@ -209,14 +209,29 @@ def _resolve_disturbance(disturbance: str, dynamics: Dynamics) -> str:
 
 
 def _stack(values) -> ca.SX:
-    return ca.vertcat(*values) if len(values) else ca.SX(0, 1)
+    if isinstance(values, (ca.SX, ca.MX)):
+        return values
+    values = list(values) if isinstance(values, (list, tuple)) else [values]
+    return ca.vertcat(*values) if values else ca.SX(0, 1)
 
 
-def _check_common(sample_period: float, delay_samples: int, substeps: int) -> None:
+def _rhs(dynamics: Dynamics, x, u, h, d) -> ca.SX:
+    """``rhs`` stacked, checked for one entry per state."""
+    value = _stack(dynamics.rhs(x, u, h, d))
+    if value.numel() != len(dynamics.state_names):
+        raise ValueError(f"the dynamics' rhs gives {value.numel()} entries for {len(dynamics.state_names)} states "
+                         f"{dynamics.state_names}")
+    return value
+
+
+def check_sampling(sample_period: float, delay_samples: int, substeps: int) -> None:
+    """``ValueError`` unless the sample period is finite and > 0, the dead time an integer >= 0
+    and the RK4 substeps an integer >= 1."""
     if not (np.isfinite(sample_period) and sample_period > 0):
         raise ValueError(f"sample_period must be finite and > 0, got {sample_period}")
-    if delay_samples < 0 or substeps < 1:
-        raise ValueError(f"need delay_samples >= 0 and substeps >= 1, got {delay_samples}, {substeps}")
+    for name, value, least in (("delay_samples", delay_samples, 0), ("substeps", substeps, 1)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
+            raise ValueError(f"{name} must be an integer >= {least}, got {value!r}")
 
 
 def _no_hysteresis(_):
@@ -228,7 +243,7 @@ class _Parts:
 
     def __init__(self, dynamics: Dynamics, disturbance: str, sample_period: float, substeps: int):
         self.dynamics, self.mode = dynamics, disturbance
-        self.h_period = sample_period / substeps
+        self.substep = sample_period / substeps
         self.substeps = substeps
         self.nd = 0 if disturbance == "none" else 1
 
@@ -246,12 +261,11 @@ class _Parts:
         if not dyn.state_names:
             return x
         probe = ca.SX.sym("h")
-        if not ca.depends_on(_stack(dyn.rhs(x, u, probe, self.d_in(d))), probe):
+        if not ca.depends_on(_rhs(dyn, x, u, probe, self.d_in(d)), probe):
             h_of = _no_hysteresis  # the dynamics do not see h: do not build it at every stage
         if dyn.discrete:
-            return _stack(dyn.rhs(x, u, self.h_in(h_of(x), d), self.d_in(d)))
-        return rk4(lambda xs, t: _stack(dyn.rhs(xs, u, self.h_in(h_of(xs), d), self.d_in(d))), x,
-                   self.h_period, self.substeps)
+            return _rhs(dyn, x, u, self.h_in(h_of(x), d), self.d_in(d))
+        return rk4(lambda xs, t: _rhs(dyn, xs, u, self.h_in(h_of(xs), d), self.d_in(d)), x, self.substep, self.substeps)
 
     def output_and_sensors(self, x, h, d):
         """Tracked output and sensor vector for dynamic state ``x`` and hysteresis output ``h``."""
@@ -282,7 +296,7 @@ class _Parts:
         if ca.depends_on(x_next, u) or ca.depends_on(ca.vertcat(y, z), h):
             return None
         return PredictionModel(
-            step=ca.Function("dynamics_step", [x, h, d], [x_next], ["x", "u", "d"], ["x_next"]),
+            step=ca.Function("dynamics_step", [x, h, d], [x_next], ["x", "h", "d"], ["x_next"]),
             output=ca.Function("dynamics_output", [x, d], [y], ["x", "d"], ["y"]),
             measure=ca.Function("dynamics_measure", [x, d], [z], ["x", "d"], ["z"]),
             sample_period=sample_period, state_names=dyn.state_names, sensor_names=dyn.sensor_names)
@@ -323,8 +337,8 @@ def build_prediction_model(hysteresis: HysteresisModel, sample_period: float, *,
         States ``[x_dyn, hysteresis state, dead-time queue]``, named after the dynamics'
         states, the hysteresis' ``state_names`` and ``delay_1..delay_D``.
     """
-    _check_common(sample_period, delay_samples, substeps)
-    dynamics = Dynamics() if dynamics is None else dynamics
+    check_sampling(sample_period, delay_samples, substeps)
+    dynamics = Dynamics(steady_input=lambda y: y) if dynamics is None else dynamics
     mode = _resolve_disturbance(disturbance, dynamics)
     if not (np.isfinite(creep_order) and 0 <= creep_order < 1):
         raise ValueError(f"creep_order must be in [0, 1), got {creep_order}")
@@ -359,9 +373,8 @@ def build_prediction_model(hysteresis: HysteresisModel, sample_period: float, *,
     names = (*dynamics.state_names, *hys_names, *(f"delay_{i + 1}" for i in range(D)))
     memory_info = None
     if drive is None:
-        split = parts.dynamics_model(sample_period)
-        if split is not None or not (n_dyn or dynamics.sensor_names):
-            memory_info = InputMemory(hysteresis, D, split, steady_input=dynamics.steady_input, disturbance=mode)
+        memory_info = InputMemory(hysteresis, D, parts.dynamics_model(sample_period),
+                                  steady_input=dynamics.steady_input, disturbance=mode, n_dynamic=n_dyn)
     return PredictionModel(
         step=ca.Function(f"{name}_step", [x, u, d], [x_next], ["x", "u", "d"], ["x_next"]),
         output=ca.Function(f"{name}_output", [x, d], [y], ["x", "d"], ["y"]),
@@ -387,9 +400,11 @@ class CreepPredictionModel:
         self._parts = _Parts(dynamics, disturbance, sample_period, substeps)
         self.dynamics = self._parts.dynamics_model(sample_period)
         if self.dynamics is None:
-            raise ValueError("a creep model needs dynamic states")
+            raise ValueError("a creep model needs dynamics driven by the creep output alone: dynamic states whose "
+                             "rhs does not read the input, and an output that does not read h")
         self.sensor_names = dynamics.sensor_names
-        self.memory = InputMemory(hysteresis, 0, self.dynamics, creep_order, dynamics.steady_input, disturbance)
+        self.memory = InputMemory(hysteresis, 0, self.dynamics, creep_order, dynamics.steady_input, disturbance,
+                                  self.dynamics.nx)
 
     @property
     def nd(self) -> int:

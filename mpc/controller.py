@@ -31,13 +31,13 @@ def default_observer(model: PredictionModel | CreepPredictionModel, sensor_noise
     an input-driven model, an EKF on every state otherwise; EKFs tuned from ``sensor_noise``
     (:meth:`DisturbanceEKF.from_sensor_noise`)."""
     memory = model.memory
-    if memory is not None and memory.dynamics is None:
-        return MemoryObserver(model, creep_window=creep_window)
-    if sensor_noise is None:
-        raise ValueError("the model has sensors: give sensor_noise (each sensor's standard deviation) "
-                         "or an observer")
+    if memory is not None and not (memory.n_dynamic or model.sensor_names):
+        return MemoryObserver(model, creep_window=creep_window)  # feed-forward: the inputs fix the state
+    if model.sensor_names and sensor_noise is None:
+        raise ValueError(f"the model has sensors {model.sensor_names}: give sensor_noise (each sensor's standard "
+                         "deviation) or an observer")
     if memory is not None:
-        ekf, p0 = DisturbanceEKF.from_sensor_noise(memory.dynamics, sensor_noise)
+        ekf, p0 = DisturbanceEKF.from_sensor_noise(memory.dynamics or model, sensor_noise)
         return MemoryObserver(model, ekf, initial_covariance=p0, creep_window=creep_window)
     ekf, p0 = DisturbanceEKF.from_sensor_noise(model, sensor_noise)
     return StateObserver(model, ekf, lambda z: np.zeros(model.nx), p0)
@@ -88,12 +88,16 @@ class NmpcController:
                                                                   settings, bounds, solvers)
         else:
             self.problem = MultipleShootingProblem(model, settings, bounds, solvers)
+        if observer is not None and sensor_noise is not None:
+            raise ValueError("sensor_noise tunes the default observer: give it or an observer, not both")
         self.observer = observer if observer is not None else default_observer(model, sensor_noise, creep_window)
         if inverse is None and model.memory is not None and model.memory.steady_input is not None:
             inverse = memory_inverse(model.memory, model.sample_period)
         if inverse is None and (settings.warm_start == "inverse" or settings.r_input > 0):
-            raise ValueError("nmpc.warm_start=inverse and nmpc.r_input > 0 need an inverse model: give one "
-                             "(or dynamics with steady_input), or use nmpc.warm_start=shift and r_input=0")
+            reason = ("the hysteresis is driven by a state" if model.memory is None else
+                      "the model's Dynamics give no steady_input (the hysteresis output that holds an output at rest)")
+            raise ValueError(f"no default inverse model for the warm start and r_input: {reason}; give inverse=..., "
+                             "or use nmpc.warm_start=shift with nmpc.r_input=0")
         self.inverse = inverse
         self.jump_threshold = float(jump_threshold)
         self.reset()
@@ -174,8 +178,8 @@ class NmpcController:
             else:
                 u = self._u_last
             self._plan = None
-        if not np.isfinite(u):  # never send NaN to an actuator
-            u = float(u_inv()[0]) if self.inverse is not None and np.isfinite(u_inv()[0]) else self._u_last
+        if not np.isfinite(u):  # never send NaN to an actuator (u_inv is finite: it fills in the last input)
+            u = float(u_inv()[0]) if self.inverse is not None else self._u_last
         u = self.bounds.clip(u, self._u_last)
         self._u_last = u
         self._started = True

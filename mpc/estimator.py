@@ -83,12 +83,13 @@ class DisturbanceEKF:
         model : PredictionModel
             The model the EKF runs.
         sensor_noise : float or array_like
-            Standard deviation of each sensor (one value: every sensor), > 0.
+            Standard deviation of each sensor (one value: every sensor), > 0; unused (None)
+            for a model without sensors.
         """
-        noise = np.broadcast_to(np.asarray(sensor_noise, float), (model.nz,)).copy()
+        noise = np.broadcast_to(np.asarray(1.0 if sensor_noise is None else sensor_noise, float), (model.nz,)).copy()
         if not np.all(np.isfinite(noise)) or np.any(noise <= 0):
             raise ValueError(f"sensor_noise must be finite and > 0, got {sensor_noise}")
-        sigma = float(noise.min())
+        sigma = float(noise.min()) if model.nz else 1.0  # without sensors the EKF only predicts
         process = [(0.01 * sigma) ** 2] * model.nx + [sigma**2] * model.nd
         initial = [(10 * sigma) ** 2] * model.nx + [(1000 * sigma) ** 2] * model.nd
         return cls(model, process, noise**2), np.asarray(initial)

@@ -35,6 +35,8 @@ class Estimate:
     """Exact hysteresis state (input-driven models)."""
     history: np.ndarray | None = None
     """Creep history terms over the horizon (creep models)."""
+    queue: np.ndarray | None = None
+    """Inputs applied but still in the dead time, oldest first (input-driven models)."""
 
 
 def _finite(*arrays) -> bool:
@@ -96,19 +98,23 @@ class StateObserver:
 
 
 class MemoryObserver:
-    """Exact dead time, hysteresis and creep from the applied inputs; an EKF on the dynamics.
+    """Exact dead time, hysteresis and creep from the applied inputs; an EKF on the rest.
+
+    The EKF runs on ``model.memory.dynamics`` (the dynamics driven by the exact hysteresis
+    output) where the model splits so; otherwise on the whole model, with the exact states
+    held at their values (no process noise, no covariance: the measurement never moves them).
 
     Parameters
     ----------
     model : PredictionModel or CreepPredictionModel
         An input-driven model (``model.memory`` set).
     ekf : DisturbanceEKF, optional
-        An EKF on ``model.memory.dynamics``; None for a model without dynamic states or
-        sensors (the state then follows the inputs open loop).
+        An EKF on ``model.memory.dynamics``, or on ``model`` when that is None; None for a
+        model without dynamic states or sensors (the state then follows the inputs open loop).
     initial_state : callable, optional
-        ``z -> x_dyn0`` (default: zeros).
+        ``z -> x_dyn0``, the dynamic states from the first sensor vector (default: zeros).
     initial_covariance : array_like, optional
-        Diagonal of the EKF's covariance on ``[x_dyn; d]`` at a (re)start.
+        Diagonal of the EKF's covariance at a (re)start (default: the EKF's own).
     creep_window : int, optional
         Past samples in the creep sums (None: the whole memory).
     rest_input : float
@@ -122,11 +128,18 @@ class MemoryObserver:
             raise ValueError("a MemoryObserver needs an input-driven model (model.memory is None)")
         self.model, self.ekf = model, ekf
         self.memory: InputMemory = model.memory
-        if ekf is None and self.memory.n_dynamic:
-            raise ValueError("a model with dynamic states needs an EKF on model.memory.dynamics")
+        self.split = self.memory.dynamics is not None
+        if ekf is None and (self.memory.n_dynamic or model.sensor_names):
+            raise ValueError("a model with dynamic states or sensors needs an EKF")
         n_dyn = self.memory.n_dynamic
         self.initial_state = initial_state or (lambda z: np.zeros(n_dyn))
-        self.initial_covariance = None if initial_covariance is None else np.asarray(initial_covariance, float)
+        covariance = np.diag(ekf.P).copy() if initial_covariance is None and ekf is not None else initial_covariance
+        self.initial_covariance = None if covariance is None else np.asarray(covariance, float)
+        if ekf is not None and not self.split:  # hold the exact states: no noise, no covariance
+            held = np.arange(n_dyn, model.nx)
+            ekf.Q[held, :] = 0.0
+            ekf.Q[:, held] = 0.0
+            self.initial_covariance[held] = 0.0
         self.creep_window, self.rest_input = creep_window, float(rest_input)
         self.creeping = isinstance(model, CreepPredictionModel)
         self.reset()
@@ -144,9 +157,15 @@ class MemoryObserver:
         self.d = np.zeros(self.model.nd)
         self.predicted_output = float("nan")
 
+    def _hold(self) -> None:
+        """The whole-model EKF's exact states set to the exact memory."""
+        if self.ekf is not None and not self.split:
+            self.ekf.x = self._state(self.ekf.x[: self.memory.n_dynamic])
+
     def _restart(self, z) -> None:
         if self.ekf is not None:
-            self.ekf.reset(np.asarray(self.initial_state(z), float), np.zeros(self.model.nd), self.initial_covariance)
+            x0 = np.asarray(self.initial_state(z), float)
+            self.ekf.reset(x0 if self.split else self._state(x0), np.zeros(self.model.nd), self.initial_covariance)
 
     def update(self, z, u_last: float | None) -> bool:
         """Run the exact memory with the input applied last sample (None: first sample), then
@@ -160,16 +179,19 @@ class MemoryObserver:
             if self.creep is not None:
                 h = self.creep.push(h)
             if self.ekf is not None:
-                self.ekf.predict([h])
+                self.ekf.predict([h] if self.split else [u_last])
+        self._hold()
         restarted = False
         if self.ekf is not None:
             ekf = self.ekf
-            self.predicted_output = float(self.memory.dynamics.output(ekf.x, ekf.d))
+            output = self.memory.dynamics.output if self.split else self.model.output
+            self.predicted_output = float(output(ekf.x, ekf.d))
             ekf.update(z)
+            self._hold()
             if not _finite(ekf.x, ekf.d):
                 self._restart(z)
                 restarted = True
-            self.x, self.d = ekf.x, ekf.d
+            self.x, self.d = ekf.x[: self.memory.n_dynamic], ekf.d
         else:
             self.predicted_output = float(self.model.output(self._state(self.x), self.d))
         return restarted
@@ -181,7 +203,7 @@ class MemoryObserver:
         """The current estimate (with the creep history over ``horizon`` samples, if any)."""
         history = self.creep.history_terms(horizon) if self.creep is not None else None
         x = self.x.copy() if self.creeping else self._state(self.x)
-        return Estimate(x, self.d.copy(), self.hysteresis_state.copy(), history)
+        return Estimate(x, self.d.copy(), self.hysteresis_state.copy(), history, np.array(self.queue))
 
     def condition(self, estimate: Estimate) -> np.ndarray:
         """The problem's initial condition: ``[x; d]`` (Markov model) or the creep model's
@@ -201,7 +223,8 @@ def memory_inverse(memory: InputMemory, sample_period: float) -> Callable[[Estim
     A target the hysteresis cannot reach keeps the previous input (NaN before the first).
     """
     if memory.steady_input is None:
-        raise ValueError("the model's dynamics give no steady_input: pass an inverse, or use "
+        raise ValueError("no inverse warm start: the model's Dynamics give no steady_input (the hysteresis "
+                         "output that holds an output at rest); give one, or an inverse, or use "
                          "nmpc.warm_start=shift")
     steady, mode, hysteresis = memory.steady_input, memory.disturbance, memory.hysteresis
     alpha = memory.creep_order
@@ -214,6 +237,8 @@ def memory_inverse(memory: InputMemory, sample_period: float) -> Callable[[Estim
         targets = np.asarray(steady(reached - d) if mode == "output" else
                              steady(reached) - d if mode == "hysteresis" else steady(reached), float)
         state = est.hysteresis.copy()
+        for queued in () if est.queue is None else est.queue:  # what the dead time still holds comes first
+            state, _ = hysteresis.step(state, float(queued))
         c = gl_weights(-alpha, n) if alpha else None
         ws, out = [], np.empty(n)
         u = np.nan  # until the first reachable target (the controller fills in the last input)

@@ -38,7 +38,7 @@ class NmpcSettings:
     q_output: float = 1.0
     """Weight on the squared tracking error of each predicted output."""
     r_rate: float = 0.3
-    """Weight on the squared input change per sample (damps valve chatter from sensor noise)."""
+    """Weight on the squared input change per sample (keeps sensor noise out of the input)."""
     r_input: float = 0.0
     """Weight on the squared deviation of the input from the inverse-model input."""
     solver: str = "ipopt"

@@ -13,7 +13,7 @@ import numpy as np
 
 from hystmpc.models.base import HysteresisModel
 from hystmpc.models.integrators import rk4
-from hystmpc.models.prediction import Dynamics
+from hystmpc.models.prediction import Dynamics, check_sampling
 from hystmpc.plants.base import Measurement
 
 
@@ -46,13 +46,13 @@ class HysteresisActuator:
                  delay_samples: int = 0, noise: float | dict = 0.0,
                  input_bounds: tuple[float, float] = (-np.inf, np.inf), substeps: int = 10,
                  rest_input: float = 0.0):
-        if not (np.isfinite(sample_period) and sample_period > 0):
-            raise ValueError(f"sample_period must be finite and > 0, got {sample_period}")
-        if delay_samples < 0 or substeps < 1:
-            raise ValueError(f"need delay_samples >= 0 and substeps >= 1, got {delay_samples}, {substeps}")
+        check_sampling(sample_period, delay_samples, substeps)
         self.hysteresis, self.dynamics = hysteresis, dynamics or Dynamics()
         self._sample_period, self.delay_samples, self.substeps = float(sample_period), delay_samples, substeps
         names = self.dynamics.sensor_names
+        if isinstance(noise, dict) and set(noise) - set(names):
+            raise ValueError(f"noise names sensors {sorted(set(noise) - set(names))} the dynamics do not have; "
+                             f"sensors: {', '.join(names) or 'none'}")
         self.noise = {n: float(noise.get(n, 0.0) if isinstance(noise, dict) else noise) for n in names}
         if any(not (np.isfinite(v) and v >= 0) for v in self.noise.values()):
             raise ValueError(f"noise must be finite and >= 0, got {noise}")
@@ -76,8 +76,13 @@ class HysteresisActuator:
         return self._measure()
 
     def _rhs(self, u, h):
-        rhs = self.dynamics.rhs
-        return lambda x, t: np.array([float(v) for v in rhs(x, u, h, 0.0)])
+        return lambda x, t: self._evaluate(x, u, h)
+
+    def _evaluate(self, x, u, h) -> np.ndarray:
+        value = np.atleast_1d(np.asarray(self.dynamics.rhs(x, u, h, 0.0), float)).ravel()
+        if len(value) != len(x):
+            raise ValueError(f"the dynamics' rhs gives {len(value)} entries for {len(x)} states")
+        return value
 
     def step(self, u: float) -> Measurement:
         """Apply the input ``u`` for one sample (saturated at the input bounds)."""
@@ -100,14 +105,17 @@ class HysteresisActuator:
 
     def _advance(self, u_in: float, h: float, substeps: int) -> np.ndarray:
         if self.dynamics.discrete:
-            return np.array([float(v) for v in self.dynamics.rhs(self._x, u_in, h, 0.0)])
+            return self._evaluate(self._x, u_in, h)
         return rk4(self._rhs(u_in, h), self._x, self._sample_period / self.substeps, substeps)
 
     def _measure(self) -> Measurement:
         dyn = self.dynamics
         h = self.hysteresis.output(self._hys)
         y = float(dyn.output(self._x, h))
-        values = [y] if dyn.measure is None else [float(v) for v in dyn.measure(self._x, h, y)]
+        if not dyn.sensor_names:
+            values = []
+        else:
+            values = [y] if dyn.measure is None else [float(v) for v in dyn.measure(self._x, h, y)]
         noisy = {n: v + self.noise[n] * self._rng.standard_normal() for n, v in zip(dyn.sensor_names, values,
                                                                                       strict=True)}
         return Measurement(t=self._t, y=noisy.get("y", y), sensors={n: v for n, v in noisy.items() if n != "y"},

@@ -89,8 +89,8 @@ def _controller_inputs(bench, name: str, config, measurements) -> np.ndarray:
 
 
 def _instructions(function) -> int:
-    """Instructions of a CasADi Function (a Switch, which has none of its own, counts 0)."""
-    return function.n_instructions() if function.class_name() != "Switch" else 0
+    """Instructions of a CasADi expression Function (a Switch or a QP solver counts 0)."""
+    return function.n_instructions() if function.class_name() in ("SXFunction", "MXFunction") else 0
 
 
 def _closed_loops(bench, config, group: str) -> list[np.ndarray]:
