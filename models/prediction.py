@@ -370,6 +370,9 @@ def build_prediction_model(hysteresis: HysteresisModel, sample_period: float, *,
         hys_next = hys_next[1:]
     x_next = ca.vertcat(x_dyn_next, hys_next, *[queue[i] for i in range(1, D)], *([u] if D else []))
     y, z = parts.output_and_sensors(x_dyn, hysteresis.output(hys0), dd)
+    if parts.nd and not ca.depends_on(ca.vertcat(x_next, y), d):
+        raise ValueError(f"disturbance={mode!r}: the dynamics' rhs never reads d, so the tracking would not be "
+                         "offset-free; let rhs use d or choose another disturbance")
     names = (*dynamics.state_names, *hys_names, *(f"delay_{i + 1}" for i in range(D)))
     memory_info = None
     if drive is None:

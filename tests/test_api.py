@@ -79,3 +79,8 @@ def test_a_bench_scenario_refuses_a_conflicting_condition():
     bench = get_bench("reluctance")
     with pytest.raises(ValueError, match="rig.gap_mm=1.4 conflicts with scenario 'ramp-1.2mm'"):
         bench.prepare("ramp-1.2mm", "poly-inverse", bench.configure(["rig.gap_mm=1.4"]))
+
+
+def test_a_disturbance_that_enters_nowhere_is_refused():
+    with pytest.raises(ValueError, match="rhs never reads d"):
+        build_prediction_model(PI, 0.01, dynamics=LAG, disturbance="dynamics")
