@@ -43,14 +43,16 @@ class PidGains:
 class Pid:
     """Discrete PID with clamping anti-windup and an additive feed-forward term.
 
-    ``u = clip(ff + kp e + I + kd ė_f, lo, hi)``; the integral only accumulates while that
-    does not push a saturated output further into saturation.
+    ``u = clip(ff + kp e + I + kd ė_f, lo, hi)``, and within ``rate`` of the last output; the
+    integral only accumulates while that does not push a saturated output further into
+    saturation.
     """
 
-    def __init__(self, gains: PidGains, dt: float, limits: tuple[float, float]):
+    def __init__(self, gains: PidGains, dt: float, limits: tuple[float, float], rate: float = np.inf):
         self.gains = gains
         self.dt = dt
         self.lo, self.hi = limits
+        self.rate = rate
         self.reset()
 
     def reset(self) -> None:
@@ -58,6 +60,7 @@ class Pid:
         self._integral = 0.0
         self._last_error = None
         self._derivative = 0.0
+        self._last_output = None
 
     def update(self, error: float, feedforward: float = 0.0) -> float:
         """Output for this sample's error."""
@@ -69,10 +72,14 @@ class Pid:
         self._last_error = error
         integral = self._integral + g.ki * error * self.dt
         u = feedforward + g.kp * error + integral + g.kd * self._derivative
-        if self.lo <= u <= self.hi or np.sign(error) != np.sign(u - 0.5 * (self.lo + self.hi)):
+        lo, hi = self.lo, self.hi
+        if self._last_output is not None and np.isfinite(self.rate):
+            lo, hi = max(lo, self._last_output - self.rate), min(hi, self._last_output + self.rate)
+        if lo <= u <= hi or np.sign(error) != np.sign(u - 0.5 * (lo + hi)):
             self._integral = integral
-        return float(np.clip(feedforward + g.kp * error + self._integral + g.kd * self._derivative,
-                             self.lo, self.hi))
+        self._last_output = float(np.clip(feedforward + g.kp * error + self._integral + g.kd * self._derivative,
+                                          lo, hi))
+        return self._last_output
 
 
 class Feedforward(Protocol):
@@ -96,13 +103,15 @@ class PidController:
         The input's bounds; the output is clipped there (with anti-windup).
     feedforward : Feedforward, optional
         Added to the PID output before the clip.
+    rate : float
+        Largest input change per sample (default: none).
     """
 
     horizon = 0
 
     def __init__(self, gains: PidGains, sample_period: float, limits: tuple[float, float],
-                 feedforward: Feedforward | None = None):
-        self.pid = Pid(gains, sample_period, limits)
+                 feedforward: Feedforward | None = None, rate: float = np.inf):
+        self.pid = Pid(gains, sample_period, limits, rate)
         self.feedforward = feedforward
         self.reset()
 
@@ -183,14 +192,15 @@ class HysteresisCompensation:
 
 def inverse_feedforward_pid(hysteresis: HysteresisModel, gains: PidGains, sample_period: float,
                             limits: tuple[float, float], steady_input: Callable | None = None,
-                            input_of: Callable | None = None, preview: int = 0) -> PidController:
+                            input_of: Callable | None = None, preview: int = 0, rate: float = np.inf
+                            ) -> PidController:
     """Inverse feed-forward + PID (the usual scheme for an actuator with hysteresis).
 
     See :class:`InverseFeedforward` for ``steady_input``, ``input_of`` and ``preview``; the
     controller asks for ``preview`` samples of reference preview.
     """
     controller = PidController(gains, sample_period, limits,
-                               InverseFeedforward(hysteresis, steady_input, input_of, preview))
+                               InverseFeedforward(hysteresis, steady_input, input_of, preview), rate)
     controller.horizon = preview
     return controller
 

@@ -71,6 +71,10 @@ class Bench:
     """Also plot the error against the reference (katalenic2013 Figs. 11–13 style)."""
     fixed: dict[str, str] = field(default_factory=dict)
     """Keys of the groups that cannot be set on this bench, with the reason."""
+    source: str = ""
+    """Where the bench comes from when it is not built in: an actuator file's path, or a
+    plugin's entry point (``module:attribute``); :func:`hystmpc.experiments.benches.get_bench`
+    finds it again by this (sweep workers do)."""
 
     @property
     def labels(self) -> Labels:

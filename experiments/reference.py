@@ -1,4 +1,5 @@
-"""User reference trajectories from CSV (interface.md, "Reference CSV")."""
+"""User CSV files: reference trajectories (interface.md, "Reference CSV") and measured
+records for identification ("Identification")."""
 
 from __future__ import annotations
 
@@ -18,29 +19,12 @@ def load_reference(path: str | Path, bench: Bench) -> Scenario:
     rows, or values outside the bench's output range.
     """
     path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"reference file {str(path)!r} does not exist")
-    with path.open(newline="") as fh:
-        rows = list(csv.reader(fh))
-    if not rows:
-        raise ValueError(f"reference file {str(path)!r} is empty")
-    header = [h.strip() for h in rows[0]]
+    header = _header(path, "reference file")
     column = bench.output_name if bench.output_name in header else "ref"
-    missing = [c for c in ("t", column) if c not in header]
-    if missing:
-        name = bench.output_name if missing[0] == "ref" else missing[0]
-        raise ValueError(f"reference file {str(path)!r} lacks column {name!r}; "
+    if "t" in header and column not in header:
+        raise ValueError(f"reference file {str(path)!r} lacks column {bench.output_name!r}; "
                          f"needs 't' and {bench.output_name!r} (or 'ref'), has {header}")
-    it, ir = header.index("t"), header.index(column)
-    try:
-        data = np.array([[float(r[it]), float(r[ir])] for r in rows[1:] if any(c.strip() for c in r)])
-    except (ValueError, IndexError):
-        raise ValueError(f"reference file {str(path)!r} has a non-numeric or missing value") from None
-    if len(data) < 2:
-        raise ValueError(f"reference file {str(path)!r} needs at least two rows, has {len(data)}")
-    if not np.all(np.isfinite(data)):
-        bad = int(np.flatnonzero(~np.all(np.isfinite(data), axis=1))[0]) + 2
-        raise ValueError(f"reference file {str(path)!r} has NaN or infinite values (line {bad})")
+    data = read_columns(path, ("t", column), "reference file", minimum_rows=2)
     t, r = data[:, 0], data[:, 1]
     if t[0] != 0:
         raise ValueError(f"reference file {str(path)!r}: t must start at 0, starts at {t[0]}")
@@ -53,3 +37,67 @@ def load_reference(path: str | Path, bench: Bench) -> Scenario:
                          f"{bench.units}, spans [{r.min():g}, {r.max():g}]")
     return Scenario(name=path.stem, description=f"reference from {path.name}", duration=float(t[-1]),
                     reference=lambda tq: np.interp(tq, t, r))
+
+
+def _header(path: Path, what: str) -> list[str]:
+    try:
+        with path.open(newline="") as fh:
+            first = next(csv.reader(fh), None)
+    except FileNotFoundError:
+        raise ValueError(f"{what} {str(path)!r} does not exist") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{what} {str(path)!r} cannot be read as CSV text ({type(exc).__name__})") from None
+    if first is None:
+        raise ValueError(f"{what} {str(path)!r} is empty")
+    return [h.strip() for h in first]
+
+
+def read_columns(path: str | Path, columns: tuple[str, ...], what: str, minimum_rows: int = 2) -> np.ndarray:
+    """The named columns of a CSV file with a header, as a float array (rows: samples).
+
+    ``ValueError`` naming the file (as ``what``) for a missing file or column, a
+    non-numeric or missing value, NaN or infinite values, or fewer than ``minimum_rows``.
+    """
+    path = Path(path)
+    header = _header(path, what)
+    missing = [c for c in columns if c not in header]
+    if missing:
+        raise ValueError(f"{what} {str(path)!r} lacks column {missing[0]!r}; needs {', '.join(columns)}, "
+                         f"has {header}")
+    index = [header.index(c) for c in columns]
+    with path.open(newline="") as fh:
+        rows = list(csv.reader(fh))[1:]
+    try:
+        data = np.array([[float(r[i]) for i in index] for r in rows if any(c.strip() for c in r)])
+    except (ValueError, IndexError):
+        raise ValueError(f"{what} {str(path)!r} has a non-numeric or missing value") from None
+    if len(data) < minimum_rows:
+        raise ValueError(f"{what} {str(path)!r} needs at least {minimum_rows} rows, has {len(data)}")
+    if not np.all(np.isfinite(data)):
+        bad = int(np.flatnonzero(~np.all(np.isfinite(data), axis=1))[0]) + 2
+        raise ValueError(f"{what} {str(path)!r} has NaN or infinite values (line {bad})")
+    return data.reshape(len(data), len(columns))
+
+
+def load_record(path: str | Path, what: str = "data file") -> tuple[np.ndarray, np.ndarray, float]:
+    """A measured record for identification: columns ``t``, ``u``, ``y``; returns ``(u, y,
+    sample_period)``.
+
+    ``ValueError`` as :func:`read_columns`, and for a time column that is not strictly
+    increasing or not uniformly sampled (to 1e-6 of the period), fewer than
+    :data:`~hystmpc.models.identification.MIN_SAMPLES` rows or a constant input.
+    """
+    from hystmpc.models.identification import MIN_SAMPLES, check_data
+    data = read_columns(path, ("t", "u", "y"), what, minimum_rows=MIN_SAMPLES)
+    t = data[:, 0]
+    steps = np.diff(t)
+    if np.any(steps <= 0):
+        bad = int(np.flatnonzero(steps <= 0)[0]) + 3
+        raise ValueError(f"{what} {str(path)!r}: t must be strictly increasing (line {bad})")
+    period = float(np.median(steps))
+    if np.max(np.abs(steps - period)) > 1e-6 * period + 1e-12 * abs(t[-1]):
+        bad = int(np.argmax(np.abs(steps - period))) + 3
+        raise ValueError(f"{what} {str(path)!r}: t must be uniformly sampled; the step at line {bad} is "
+                         f"{steps[bad - 3]:g} s against {period:g} s")
+    u, y = check_data(data[:, 1], data[:, 2], period, f"{what} {str(path)!r}")
+    return u, y, period

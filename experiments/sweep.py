@@ -121,7 +121,7 @@ def load_spec(path: str | Path, extra_overrides: Iterable[str] = (), duration: f
     SpecError
         Naming the file, the bad entry and what is allowed.
     """
-    from hystmpc.experiments.benches import BENCH_NAMES, get_bench
+    from hystmpc.experiments.benches import get_bench, is_actuator_file
     from hystmpc.experiments.config import allowed_keys, get_value
 
     path = Path(path)
@@ -136,9 +136,14 @@ def load_spec(path: str | Path, extra_overrides: Iterable[str] = (), duration: f
     unknown = sorted(set(raw) - set(SPEC_KEYS))
     if unknown:
         _fail(path, f"unknown key {unknown[0]!r}; allowed: {', '.join(SPEC_KEYS)}")
-    if raw.get("bench") not in BENCH_NAMES:
-        _fail(path, f"bench = {raw.get('bench')!r}; allowed: {', '.join(BENCH_NAMES)}")
-    bench = get_bench(raw["bench"])
+    if not isinstance(raw.get("bench"), str):
+        _fail(path, f"bench = {raw.get('bench')!r}; a bench name or an actuator file (relative to the spec)")
+    if is_actuator_file(raw["bench"]):  # workers find it by its absolute path
+        raw["bench"] = str((path.parent / raw["bench"]).resolve())
+    try:
+        bench = get_bench(raw["bench"])
+    except ValueError as exc:
+        _fail(path, f"bench: {exc}")
     scenarios = _string_list(path, raw, "scenarios", bench.scenarios, [bench.default_scenario])
     controllers = _string_list(path, raw, "controllers", bench.controllers, list(bench.controllers))
     seeds = raw.get("seeds", [0])
@@ -181,7 +186,7 @@ def load_spec(path: str | Path, extra_overrides: Iterable[str] = (), duration: f
             _fail(path, f"perturb key {key!r} is not a real-valued parameter (it is {value!r})")
         if isinstance(amplitude, bool) or not isinstance(amplitude, (int, float)) or not 0 < amplitude < 1:
             _fail(path, f"perturb amplitude of {key!r} must be a number in (0, 1), got {amplitude!r}")
-    return SweepSpec(bench=bench.name, scenarios=scenarios, controllers=controllers, seeds=tuple(seeds),
+    return SweepSpec(bench=raw["bench"], scenarios=scenarios, controllers=controllers, seeds=tuple(seeds),
                      perturb={k: float(v) for k, v in sorted(perturb.items())}, samples=samples,
                      duration=None if duration is None else float(duration), overrides=overrides,
                      perturb_seed=perturb_seed)

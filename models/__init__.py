@@ -8,11 +8,14 @@ memory is a state vector passed in and returned, never kept on the object.
 """
 
 from hystmpc.models.base import HysteresisModel
+from hystmpc.models.document import model_document, read_model_document
 from hystmpc.models.fckp import Fckp, FckpParams
 from hystmpc.models.fractional import GrunwaldLetnikov, gl_weights
+from hystmpc.models.identification import FAMILIES, Identified, identify
 from hystmpc.models.integrators import rk4
 from hystmpc.models.kp import KrasnoselskiiPokrovskii
 from hystmpc.models.lambertw import lambertw, lambertw_function
+from hystmpc.models.linear_dynamics import LinearDynamics
 from hystmpc.models.maxwell_slip import MaxwellSlip, play_operator
 from hystmpc.models.parametric import ParametricHysteresis, identify_major_loop
 from hystmpc.models.power_function import PowerFunctionHysteresis, VirtualDeformation
@@ -25,10 +28,12 @@ from hystmpc.models.prediction import (
     Smoothing,
     build_prediction_model,
 )
+from hystmpc.models.scaled import Scaled
 from hystmpc.models.smooth import smooth_abs, smooth_clip, smooth_max, smooth_min
 
-__all__ = ["CreepPredictionModel", "Dynamics", "Fckp", "FckpParams", "GrunwaldLetnikov", "HysteresisModel",
-           "InputMemory", "KrasnoselskiiPokrovskii", "MaxwellSlip", "ParametricHysteresis",
-           "PowerFunctionHysteresis", "PrandtlIshlinskii", "PredictionModel", "Smoothing", "VirtualDeformation",
-           "build_prediction_model", "gl_weights", "identify_major_loop", "lambertw", "lambertw_function",
-           "play_operator", "rk4", "smooth_abs", "smooth_clip", "smooth_max", "smooth_min"]
+__all__ = ["FAMILIES", "CreepPredictionModel", "Dynamics", "Fckp", "FckpParams", "GrunwaldLetnikov",
+           "HysteresisModel", "Identified", "InputMemory", "KrasnoselskiiPokrovskii", "LinearDynamics", "MaxwellSlip",
+           "ParametricHysteresis", "PowerFunctionHysteresis", "PrandtlIshlinskii", "PredictionModel", "Scaled",
+           "Smoothing", "VirtualDeformation", "build_prediction_model", "gl_weights", "identify",
+           "identify_major_loop", "lambertw", "lambertw_function", "model_document", "play_operator",
+           "read_model_document", "rk4", "smooth_abs", "smooth_clip", "smooth_max", "smooth_min"]

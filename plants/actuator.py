@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from hystmpc.models.base import HysteresisModel
+from hystmpc.models.fractional import GrunwaldLetnikov
 from hystmpc.models.integrators import rk4
 from hystmpc.models.prediction import Dynamics, check_sampling
 from hystmpc.plants.base import Measurement
@@ -40,13 +41,21 @@ class HysteresisActuator:
         each).
     rest_input : float
         Input at rest before the first sample.
+    creep_order : float
+        α > 0 puts a Grünwald–Letnikov creep integral ``D^(−α)`` (full memory) between an
+        input-driven hysteresis and the dynamics, as :func:`build_prediction_model` does.
     """
 
     def __init__(self, hysteresis: HysteresisModel, sample_period: float, dynamics: Dynamics | None = None,
                  delay_samples: int = 0, noise: float | dict = 0.0,
                  input_bounds: tuple[float, float] = (-np.inf, np.inf), substeps: int = 10,
-                 rest_input: float = 0.0):
+                 rest_input: float = 0.0, creep_order: float = 0.0):
         check_sampling(sample_period, delay_samples, substeps)
+        if not (np.isfinite(creep_order) and 0 <= creep_order < 1):
+            raise ValueError(f"creep_order must be in [0, 1), got {creep_order}")
+        if creep_order > 0 and dynamics is not None and dynamics.hysteresis_input is not None:
+            raise ValueError("creep is supported after an input-driven hysteresis only")
+        self.creep_order = float(creep_order)
         self.hysteresis, self.dynamics = hysteresis, dynamics or Dynamics()
         self._sample_period, self.delay_samples, self.substeps = float(sample_period), delay_samples, substeps
         names = self.dynamics.sensor_names
@@ -73,6 +82,10 @@ class HysteresisActuator:
         self._queue = [self.rest_input] * self.delay_samples
         self._u = self.rest_input
         self._t = 0.0
+        self._creep = None
+        if self.creep_order > 0:
+            self._creep = GrunwaldLetnikov(-self.creep_order, self._sample_period)
+            self._creep_output = 0.0  # nothing pushed yet: the creep integral of the past is zero
         return self._measure()
 
     def _rhs(self, u, h):
@@ -94,6 +107,8 @@ class HysteresisActuator:
         dyn, hys = self.dynamics, self.hysteresis
         if dyn.hysteresis_input is None:
             self._hys, h = hys.step(self._hys, u_in)
+            if self._creep is not None:
+                h = self._creep_output = self._creep.push(h)
             if dyn.state_names:
                 self._x = self._advance(u_in, h, self.substeps)
         else:
@@ -111,6 +126,8 @@ class HysteresisActuator:
     def _measure(self) -> Measurement:
         dyn = self.dynamics
         h = self.hysteresis.output(self._hys)
+        if self._creep is not None:
+            h = self._creep_output
         y = float(dyn.output(self._x, h))
         if not dyn.sensor_names:
             values = []

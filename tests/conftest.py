@@ -19,3 +19,10 @@ def reversing_input():
     u = np.cumsum(rng.normal(0.0, 2.5, 400))
     u[0] = 0.0
     return u
+
+
+@pytest.fixture(scope="session", autouse=True)
+def private_cache(tmp_path_factory):
+    """Tuned baseline gains are cached on disk; the tests use their own cache, fresh per session."""
+    import os
+    os.environ["HYSTMPC_CACHE_DIR"] = str(tmp_path_factory.mktemp("cache"))

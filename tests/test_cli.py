@@ -65,7 +65,7 @@ def test_bad_usage_exits_2_with_one_line(capsys, argv, needle):
     ("time,angle\n0,1\n0.1,2\n", "lacks column 't'"),
     ("t,angle\n0,1\n0.1,abc\n", "non-numeric or missing value"),
     ("t,angle\n0,1\n0.1\n", "non-numeric or missing value"),
-    ("t,angle\n", "needs at least two rows"),
+    ("t,angle\n", "needs at least 2 rows"),
     ("", "is empty"),
     ("t,angle\n0.5,1\n1.0,2\n", "t must start at 0"),
     ("t,angle\n0,1\n1,90\n", "angle must lie in [-45.0, 45.0] deg"),

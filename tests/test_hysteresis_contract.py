@@ -18,6 +18,7 @@ from hystmpc.models import (
     ParametricHysteresis,
     PowerFunctionHysteresis,
     PrandtlIshlinskii,
+    Scaled,
 )
 
 RNG = np.random.default_rng
@@ -88,6 +89,11 @@ CASES = [
          np.clip(_walk(5, 100, 0.05, 0.0), -0.9, 0.9) * KP.total_weight,
          (1e-2, 1e-3, 1e-4), lambda eps, n: 2.4 * eps * KP.total_weight, 1e-6 * KP.total_weight,
          {"eps": 1e-2, "h": 1e-6, "rtol": 1e-5, "atol": 1e-7}, direction=lambda eps: eps / 10),
+    # the parametric family of `hystmpc identify`: the operator behind a gain (µm per A here)
+    Case("scaled-parametric", Scaled(E_CORE, 250.0), _walk(2, 600, 0.02, 3.0),
+         250.0 * (np.abs(_walk(3, 600, 0.3)) + 0.1),
+         (1e-3, 1e-4, 1e-5), lambda eps, n: 250.0 * 1e-2 * E_CORE.p1 if eps <= 1e-5 else np.inf, 250.0 * 1e-9,
+         {"eps": 1e-3, "h": 1e-7, "rtol": 1e-5, "atol": 250.0 * 1e-6}),
     Case("fckp", Fckp(), np.clip(_walk(4, 600, 0.05, 3.0), 0.0, 10.0), np.clip(_walk(6, 100, 0.1, 1.5), 0.2, 3.8),
          (1e-2, 1e-3, 1e-4), lambda eps, n: 1.2 * eps * 4.0, 1e-6,
          {"eps": 1e-2, "h": 1e-6, "rtol": 1e-5, "atol": 1e-7}, direction=lambda eps: eps / 10),

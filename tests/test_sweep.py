@@ -46,7 +46,7 @@ samples = 2
 
 @pytest.mark.parametrize("body, needle", [
     ('bench = "pam"\nsamples = 3\n', "unknown key 'samples'; allowed: bench, scenarios"),
-    ('bench = "nosuch"\n', "bench = 'nosuch'; allowed: pam, compliant, reluctance, dea"),
+    ('bench = "nosuch"\n', "bench: unknown bench 'nosuch'; allowed: pam, compliant, reluctance, dea"),
     ('bench = "pam"\nscenarios = ["square-99"]\n', "unknown scenario 'square-99'; allowed: square-10"),
     ('bench = "pam"\ncontrollers = ["lqr"]\n', "unknown controller 'lqr'; allowed: pi, pi-hc, nmpc"),
     ('bench = "pam"\nseeds = [1, 1]\n', "seeds must be a non-empty list of distinct integers"),

@@ -96,14 +96,35 @@ def identified_model(config) -> ReluctanceModel:
     return identify(plant, config["identification"], force_max)
 
 
-def identified_document(config) -> dict:
-    """The identified model of the configured core as a JSON-ready dict (``hystmpc identify``)."""
-    model = identified_model(config)
+def measured_loops(path) -> dict[float, tuple[np.ndarray, np.ndarray]]:
+    """Major loops from a measured file: columns ``t``, ``u`` (current, A), ``y`` (force, N) and
+    ``gap_mm``; one 0 → max → 0 run per air gap (Fig. 9). ``ValueError`` naming what is wrong."""
+    from hystmpc.experiments.reference import read_columns
+    data = read_columns(path, ("t", "u", "y", "gap_mm"), "loop file", minimum_rows=20)
+    loops = {}
+    for gap in np.unique(data[:, 3]):
+        rows = data[data[:, 3] == gap]
+        if not 1.0 <= gap <= 2.0:
+            raise ValueError(f"loop file {path}: gap_mm {gap:g} is outside the rig's [1.0, 2.0] mm")
+        if len(rows) < 20 or np.ptp(rows[:, 1]) <= 0:
+            raise ValueError(f"loop file {path}: the loop at gap {gap:g} mm needs 20 rows and a varying current")
+        loops[float(gap) * 1e-3] = (rows[:, 1], rows[:, 2])
+    return loops
+
+
+def identified_document(config, loops: dict | None = None) -> dict:
+    """The identified model of the configured core as a JSON-ready dict (``hystmpc identify``):
+    from the simulated experiment, or from measured ``loops`` (:func:`measured_loops`)."""
     plant, _, force_max = rig(config)
+    if loops is None:
+        model = identified_model(config)
+        truth = {"true_p1_A": plant.p1, "true_p2_per_A_m": plant.p2}
+    else:
+        model = fit_reluctance_model(loops, window=config["identification"].window)
+        truth = {"source": "measured loops"}
     return {
         "schema": "hystmpc.identified/1", "bench": "reluctance", "core": config["rig"].core,
-        "p1_A": model.p1, "p2_per_A_m": model.p2,
-        "true_p1_A": plant.p1, "true_p2_per_A_m": plant.p2,
+        "p1_A": model.p1, "p2_per_A_m": model.p2, **truth,
         "gaps_m": list(model.gaps),
         "tables": [{"gap_m": g, "force_N": f.tolist(), "x_A": x.tolist()}
                    for g, (f, x) in zip(model.gaps, model.tables, strict=True)],

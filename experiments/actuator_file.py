@@ -1,0 +1,470 @@
+"""Actuator files (TOML, interface.md "Actuator files"): your own actuator as a bench.
+
+From one file hystmpc builds, for every command that takes a bench:
+
+* the **prediction model**: the identified hysteresis (a ``hystmpc.model/1`` document),
+  creep if the family has one, and the linear block after it (exact zero-order-hold
+  discretisation), with the dead time;
+* the **controllers**: ``nmpc``, and the baselines ``pid`` and ``inverse-ff-pid``, whose
+  gains are tuned automatically on the nominal model (:mod:`hystmpc.experiments.tuning`);
+* a **simulated plant**: the exact, non-smooth model with every parameter perturbed by a
+  seeded relative ``mismatch`` and sensor noise, so that no controller runs on its own model;
+* two **scenarios** from the output range: ``sine`` and ``staircase``.
+
+Groups for ``--set`` (and for optional tables of the same names in the file): ``plant``
+(mismatch, seed, noise), ``model`` (``model.hysteresis.*``: the family's parameters;
+``model.dynamics.*``), ``nmpc``, ``smoothing``, ``solver``, ``pid``, ``inverse_ff_pid``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import logging
+import os
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hystmpc.experiments.baselines import PidController, PidGains, inverse_feedforward_pid
+from hystmpc.experiments.bench import Bench, ControllerSpec
+from hystmpc.experiments.config import apply_overrides
+from hystmpc.experiments.runner import Scenario
+from hystmpc.models.document import dynamics_from, read_model_document
+from hystmpc.models.identification import FAMILIES
+from hystmpc.models.linear_dynamics import LinearDynamics
+from hystmpc.models.prediction import Smoothing, build_prediction_model
+from hystmpc.mpc import InputBounds, NmpcController, NmpcSettings, SolverSettings
+from hystmpc.plants.actuator import HysteresisActuator
+
+LOG = logging.getLogger("hystmpc")
+TUNING_RULE = "mean-rmse-nelder-mead/3"
+"""Names the tuning rule in the cache key: change it when the rule changes."""
+GROUP_TABLES = ("nmpc", "smoothing", "solver", "pid", "inverse_ff_pid")
+"""Optional tables that set the groups of the same name (as ``--set`` would)."""
+TABLES = {
+    "model": {"file"},
+    "dynamics": {"kind", "natural_frequency_hz", "damping", "time_constant", "delay_samples"},
+    "sensor": {"noise_std"},
+    "plant": {"mismatch", "seed"},
+    "scenarios": {"sine_hz", "step_s", "duration_s"},
+}
+KEYS = {"name", "description", "sample_period", "output_name", "units", "input_units", "input_bounds",
+        "input_rate", "output_range", *TABLES, *GROUP_TABLES}
+
+
+@dataclass(frozen=True)
+class FeedforwardPidGains(PidGains):
+    """PID gains and the feed-forward's reference preview (``--set inverse_ff_pid.*``)."""
+
+    preview: int = 0
+    """Samples by which the inverse feed-forward leads the reference (it covers the dead time,
+    the sampling's one sample and the block's lag)."""
+
+    def __post_init__(self):
+        super().__post_init__()
+        if not (isinstance(self.preview, int) and 0 <= self.preview <= 1000):
+            raise ValueError(f"preview must be an integer in [0, 1000], got {self.preview}")
+
+
+@dataclass(frozen=True)
+class ActuatorPlant:
+    """The simulated truth of an actuator file (``--set plant.*``)."""
+
+    mismatch: float = 0.05
+    """Relative perturbation of every model parameter, uniform in ±mismatch (0: the model itself)."""
+    seed: int = 0
+    """Seed of the perturbation."""
+    noise: float = 0.0
+    """Sensor noise standard deviation (output units)."""
+
+    def __post_init__(self):
+        if not (np.isfinite(self.mismatch) and 0 <= self.mismatch <= 0.5):
+            raise ValueError(f"mismatch must be in [0, 0.5], got {self.mismatch}")
+        if not (np.isfinite(self.noise) and self.noise >= 0):
+            raise ValueError(f"noise must be finite and >= 0, got {self.noise}")
+
+
+@dataclass(frozen=True)
+class ActuatorModel:
+    """What the controllers believe (``--set model.hysteresis.*``, ``model.dynamics.*``)."""
+
+    hysteresis: Any
+    """The family's parameters (a frozen dataclass made from the model document)."""
+    dynamics: LinearDynamics = LinearDynamics()
+    """The linear block after the hysteresis and the dead time."""
+
+
+def _frozen(value):
+    if isinstance(value, list):
+        return tuple(_frozen(v) for v in value)
+    return value
+
+
+def parameter_class(family: str, parameters: dict, sample_period: float):
+    """A frozen dataclass holding ``parameters`` (defaults), validated by building the model."""
+    build = FAMILIES[family].build
+
+    def check(self):
+        try:
+            build(dataclasses.asdict(self), sample_period)
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"bad {family} parameters: {exc}") from None
+
+    fields = [(name, type(_frozen(value)), dataclasses.field(default=_frozen(value)))
+              for name, value in parameters.items()]
+    cls_name = "".join(part.title() for part in family.split("-")) + "Parameters"
+    return dataclasses.make_dataclass(cls_name, fields, frozen=True, namespace={"__post_init__": check})
+
+
+def _perturbed(value, rng, mismatch: float):
+    if isinstance(value, tuple) and value and isinstance(value[0], tuple):  # points: scale the outputs together
+        factor = 1 + mismatch * rng.uniform(-1, 1)
+        return tuple((p[0], p[1] * factor) for p in value)
+    if isinstance(value, tuple):
+        return tuple(v * (1 + mismatch * rng.uniform(-1, 1)) for v in value)
+    return value * (1 + mismatch * rng.uniform(-1, 1))
+
+
+def perturb(model: ActuatorModel, family: str, mismatch: float, seed: int) -> ActuatorModel:
+    """``model`` with the family's parameters (:attr:`Family.mismatch`, polylines' outputs
+    as a whole) and the dynamics' time constants perturbed by ±``mismatch``, seeded."""
+    rng = np.random.default_rng(seed)
+    names = FAMILIES[family].mismatch + (("ascending", "descending") if family == "power-function" else ())
+    h = dataclasses.replace(model.hysteresis, **{n: _perturbed(getattr(model.hysteresis, n), rng, mismatch)
+                                                  for n in names})
+    dyn = model.dynamics
+    dyn = dataclasses.replace(dyn, **{n: _perturbed(getattr(dyn, n), rng, mismatch)
+                                      for n in ("time_constant", "natural_frequency_hz", "damping")})
+    return ActuatorModel(h, dyn)
+
+
+class ActuatorSpec:
+    """A parsed actuator file; :meth:`bench` makes the :class:`Bench`."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path).resolve()
+        raw = self._read()
+        self.raw = raw
+        where = f"actuator file {path}"
+        self.name = self._text(raw, "name", None)
+        self.description = self._text(raw, "description", f"your actuator ({self.path.name})")
+        self.output_name = self._text(raw, "output_name", "output")
+        self.units = self._text(raw, "units", "")
+        self.input_units = self._text(raw, "input_units", "")
+        self.sample_period = self._number(raw, "sample_period", None, positive=True)
+        self.input_bounds = self._pair(raw, "input_bounds")
+        self.output_range = self._pair(raw, "output_range")
+        self.input_rate = self._number(raw, "input_rate", np.inf, positive=True)
+        model = raw.get("model", {})
+        if "file" not in model:
+            raise ValueError(f"{where}: missing key 'model.file' (the hystmpc.model/1 document)")
+        model_file = (self.path.parent / str(model["file"])).resolve()
+        try:
+            self.identified = read_model_document(model_file, self.sample_period)
+        except ValueError as exc:
+            raise ValueError(f"{where}: model.file: {exc}") from None
+        self.family = self.identified.family
+        self.dynamics = self.identified.dynamics
+        if "dynamics" in raw:
+            self.dynamics = dynamics_from(raw["dynamics"], f"{where}: [dynamics]")
+        sensor, plant = raw.get("sensor", {}), raw.get("plant", {})
+        self.noise = self._number(sensor, "noise_std", 0.0, key="sensor.noise_std")
+        self.plant = ActuatorPlant(self._number(plant, "mismatch", 0.05, key="plant.mismatch"),
+                                   int(self._number(plant, "seed", 0, key="plant.seed")), self.noise)
+        scen = raw.get("scenarios", {})
+        self.sine_hz = self._number(scen, "sine_hz", self._default_sine_hz(), positive=True, key="scenarios.sine_hz")
+        self.step_s = self._number(scen, "step_s", 0.5 / self.sine_hz, positive=True, key="scenarios.step_s")
+        self.duration_s = self._number(scen, "duration_s", 4.5 / self.sine_hz, positive=True,
+                                       key="scenarios.duration_s")
+        self.overrides = [f"{group}.{key}={value}" for group in GROUP_TABLES
+                          for key, value in _flatten(raw.get(group, {}))]
+        self._tuned: dict = {}
+        try:
+            self._configured()
+        except ValueError as exc:
+            raise ValueError(f"{where}: {exc}") from None
+
+    def _read(self) -> dict:
+        try:
+            with self.path.open("rb") as fh:
+                raw = tomllib.load(fh)
+        except FileNotFoundError:
+            raise ValueError(f"actuator file {self.path} does not exist") from None
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+            raise ValueError(f"actuator file {self.path}: not valid TOML ({exc})") from None
+        for key, value in raw.items():
+            if key not in KEYS:
+                raise ValueError(f"actuator file {self.path}: unknown key {key!r}; allowed: {', '.join(sorted(KEYS))}")
+            if key in TABLES or key in GROUP_TABLES:
+                if not isinstance(value, dict):
+                    raise ValueError(f"actuator file {self.path}: {key!r} must be a table ([{key}])")
+                for sub in value if key in TABLES else ():
+                    if sub not in TABLES[key]:
+                        raise ValueError(f"actuator file {self.path}: unknown key '{key}.{sub}'; allowed in "
+                                         f"[{key}]: {', '.join(sorted(TABLES[key]))}")
+        return raw
+
+    def _fail(self, key: str, message: str) -> ValueError:
+        return ValueError(f"actuator file {self.path}: {key} {message}")
+
+    def _text(self, raw, key, default):
+        if key not in raw:
+            if default is None:
+                raise self._fail(key, "is missing")
+            return default
+        if not isinstance(raw[key], str) or not raw[key].strip():
+            raise self._fail(key, f"must be a non-empty string, got {raw[key]!r}")
+        return raw[key]
+
+    def _number(self, raw, name, default, positive=False, key=None):
+        key = key or name
+        if name not in raw:
+            if default is None:
+                raise self._fail(key, "is missing")
+            return default
+        value = raw[name]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or (
+                value <= 0 if positive else value < 0):
+            raise self._fail(key, f"must be a finite number {'> 0' if positive else '>= 0'}, got {value!r}")
+        return value
+
+    def _pair(self, raw, key):
+        value = raw.get(key)
+        if value is None:
+            raise self._fail(key, "is missing ([low, high])")
+        if (not isinstance(value, list) or len(value) != 2
+                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in value)
+                or not value[0] < value[1]):
+            raise self._fail(key, f"must be [low, high] with finite low < high, got {value!r}")
+        return float(value[0]), float(value[1])
+
+    def _default_sine_hz(self) -> float:
+        """A tenth of the block's bandwidth (a 25th of the sample rate without a block)."""
+        d = self.dynamics
+        rate = 1.0 / self.sample_period
+        if d.kind == "second-order":
+            return min(d.natural_frequency_hz / 15, rate / 25)
+        if d.kind == "first-order":
+            return min(1 / (2 * np.pi * d.time_constant) / 5, rate / 25)
+        return rate / 100
+
+    # ----- what the bench is built from ------------------------------------------------------------
+    def defaults(self) -> dict:
+        """Fresh parameter groups, the file's own tables applied, the PID gains tuned."""
+        config = self._configured()
+        config |= self.tuned_gains(config)
+        return apply_overrides(config, self.overrides)  # the file's [pid] keys win over the tuned gains
+
+    def _configured(self) -> dict:
+        """The groups before tuning, the file's tables applied."""
+        cls = parameter_class(self.family, self.identified.parameters, self.sample_period)
+        model = ActuatorModel(cls(), self.dynamics)
+        span_y = self.output_range[1] - self.output_range[0]
+        span_u = self.input_bounds[1] - self.input_bounds[0]
+        horizon = int(np.clip(self.dynamics.delay_samples + round(self._settling() / self.sample_period) + 2, 10, 40))
+        config = {"plant": self.plant, "model": model,
+                  "nmpc": NmpcSettings(horizon=horizon, q_output=(100 / span_y) ** 2,
+                                       r_rate=1e-3 * (100 / span_u) ** 2, solver="rti"),
+                  "smoothing": Smoothing(eps=5e-5 * span_u), "solver": SolverSettings(),
+                  "pid": PidGains(), "inverse_ff_pid": FeedforwardPidGains()}
+        return apply_overrides(config, self.overrides)
+
+    def _settling(self) -> float:
+        d = self.dynamics
+        if d.kind == "second-order":
+            return 3.0 / (d.damping * 2 * np.pi * d.natural_frequency_hz)
+        return 3.0 * d.time_constant if d.kind == "first-order" else 0.0
+
+    def hysteresis(self, model: ActuatorModel):
+        """``(hysteresis model, creep order)`` of a ``model`` group."""
+        return FAMILIES[self.family].build(dataclasses.asdict(model.hysteresis), self.sample_period)
+
+    def plant_of(self, model: ActuatorModel, noise: float) -> HysteresisActuator:
+        """The exact model as a plant."""
+        hysteresis, creep_order = self.hysteresis(model)
+        rest = float(np.clip(0.0, *self.input_bounds))
+        return HysteresisActuator(hysteresis, self.sample_period,
+                                  model.dynamics.discrete(self.sample_period, hold=creep_order > 0),
+                                  model.dynamics.delay_samples, noise, self.input_bounds, rest_input=rest,
+                                  creep_order=creep_order)
+
+    def make_plant(self, config: dict) -> HysteresisActuator:
+        """The simulated truth: the ``model`` group perturbed by ``plant.mismatch``, with noise."""
+        plant: ActuatorPlant = config["plant"]
+        truth = perturb(config["model"], self.family, plant.mismatch, plant.seed)
+        return self.plant_of(truth, plant.noise)
+
+    def build_pid(self, config: dict, feedforward: bool, gains: PidGains | None = None):
+        """``pid`` or ``inverse-ff-pid`` on the ``model`` group."""
+        model: ActuatorModel = config["model"]
+        gains = gains if gains is not None else config["inverse_ff_pid" if feedforward else "pid"]
+        if not feedforward:
+            return PidController(gains, self.sample_period, self.input_bounds, rate=self.input_rate)
+        hysteresis, _ = self.hysteresis(model)
+        return inverse_feedforward_pid(hysteresis, gains, self.sample_period, self.input_bounds,
+                                       preview=gains.preview, rate=self.input_rate)
+
+    def build_nmpc(self, config: dict) -> NmpcController:
+        """The NMPC on the smoothed model, EKF from the sensor noise, inverse warm start."""
+        model: ActuatorModel = config["model"]
+        smoothing: Smoothing = config["smoothing"]
+        hysteresis, creep_order = self.hysteresis(model)
+        pm = build_prediction_model(hysteresis, self.sample_period,
+                                    dynamics=model.dynamics.discrete(self.sample_period, hold=creep_order > 0),
+                                    eps=smoothing.eps, direction_eps=smoothing.direction,
+                                    delay_samples=model.dynamics.delay_samples, creep_order=creep_order)
+        bounds = InputBounds(*self.input_bounds, self.input_rate)
+        noise = max(self.noise, 1e-3 * (self.output_range[1] - self.output_range[0]))
+        return NmpcController(pm, bounds, config["nmpc"], config["solver"], sensor_noise=noise)
+
+    def tuned_gains(self, config: dict) -> dict[str, PidGains]:
+        """Both baselines' gains by :func:`hystmpc.experiments.tuning.tune_pid` on the
+        nominal ``model`` group; for ``inverse-ff-pid`` also its preview: of dead time + one
+        sample + the block's lag and its two neighbours, the one with the best point of the
+        coarse gain grid, before the gains are tuned at it.
+
+        Tuning takes seconds to tens of seconds, so the result is kept in memory and on disk
+        (:func:`cache_dir`), keyed by everything it depends on.
+        """
+        model = config["model"]
+        key = repr(model)
+        if key not in self._tuned:
+            self._tuned[key] = self._cached_tuning(model, config)
+        return self._tuned[key]
+
+    def _cached_tuning(self, model: ActuatorModel, config: dict) -> dict[str, PidGains]:
+        from hystmpc.experiments.report import version
+        identity = json.dumps({"rule": TUNING_RULE, "version": version(), "model": dataclasses.asdict(model),
+                               "sample_period": self.sample_period, "bounds": self.input_bounds,
+                               "rate": str(self.input_rate), "scenarios": [self.sine_hz, self.step_s, self.duration_s],
+                               "output_range": self.output_range}, sort_keys=True, default=str)
+        path = cache_dir() / f"tuning-{hashlib.sha256(identity.encode()).hexdigest()[:20]}.json"
+        try:
+            stored = json.loads(path.read_text())
+            return {"pid": PidGains(**stored["pid"]), "inverse_ff_pid": FeedforwardPidGains(**stored["inverse_ff_pid"])}
+        except (OSError, ValueError, KeyError, TypeError):
+            pass
+        LOG.info("tuning the PID baselines of %s on its nominal model (once; cached in %s)", self.name, path.parent)
+        tuned = self._tune(model, config)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            partial = path.with_suffix(f".{os.getpid()}.tmp")
+            partial.write_text(json.dumps({k: dataclasses.asdict(v) for k, v in tuned.items()}))
+            partial.replace(path)
+        except OSError as exc:  # a read-only home: tune again next time
+            LOG.info("could not cache the tuned gains (%s)", exc)
+        return tuned
+
+    def _tune(self, model: ActuatorModel, config: dict) -> dict[str, PidGains]:
+        from hystmpc.experiments.tuning import coarse_start, mean_rmse, tune_pid
+        hysteresis, _ = self.hysteresis(model)
+        state = hysteresis.initial_state(self.input_bounds[0])
+        _, y_lo = hysteresis.step(state, self.input_bounds[0])
+        _, y_hi = hysteresis.step(state, self.input_bounds[1])
+        gain = (y_hi - y_lo) / (self.input_bounds[1] - self.input_bounds[0])
+        dead = (model.dynamics.delay_samples + 1) * self.sample_period + model.dynamics.lag()
+        plant = self.plant_of(model, 0.0)
+        scenarios = list(self.scenarios().values())
+        pid = tune_pid(lambda g: self.build_pid(config | {"model": model}, False, g), plant, scenarios,
+                       gain, dead, self.sample_period)[0]
+        rule = model.dynamics.delay_samples + 1 + int(round(model.dynamics.lag() / self.sample_period))
+
+        def feedforward(preview):
+            return lambda g: self.build_pid(config | {"model": model}, True,
+                                            FeedforwardPidGains(**dataclasses.asdict(g), preview=preview))
+
+        def coarse(preview):
+            def cost(z):
+                gains = PidGains(kp=float(np.exp(z[0])), ki=float(np.exp(z[1])),
+                                 derivative_filter=3 * self.sample_period)
+                return mean_rmse(feedforward(preview)(gains), plant, scenarios)
+            return coarse_start(cost, gain, dead, self.sample_period)[1]
+        preview = min((rule - 1, rule, rule + 1), key=coarse)
+        gains = tune_pid(feedforward(preview), plant, scenarios, gain, dead, self.sample_period)[0]
+        return {"pid": pid, "inverse_ff_pid": FeedforwardPidGains(**dataclasses.asdict(gains), preview=preview)}
+
+    def scenarios(self) -> dict[str, Scenario]:
+        """``sine`` and ``staircase`` over the output range, from the output at rest."""
+        lo, hi = self.output_range
+        span, mid = hi - lo, 0.5 * (lo + hi)
+        hysteresis, _ = self.hysteresis(ActuatorModel(
+            parameter_class(self.family, self.identified.parameters, self.sample_period)(), self.dynamics))
+        rest = float(np.clip(0.0, *self.input_bounds))
+        y_rest = float(np.clip(hysteresis.output(hysteresis.initial_state(rest)), lo, hi))
+        f, amp = self.sine_hz, 0.4 * span
+        approach = 0.5 / f
+        start = mid - amp
+
+        def sine(t):
+            t = np.asarray(t, float)
+            ramp = y_rest + (start - y_rest) * 0.5 * (1 - np.cos(np.pi * np.clip(t / approach, 0, 1)))
+            return np.where(t < approach, ramp, mid - amp * np.cos(2 * np.pi * f * (t - approach)))
+
+        levels = np.concatenate(([y_rest], lo + span * np.array([0.2, 0.6, 0.4, 0.8, 0.3, 0.7, 0.5])))
+
+        def staircase(t):  # from rest: every step is ahead, none at t = 0
+            index = np.minimum((np.asarray(t, float) / self.step_s).astype(int), len(levels) - 1)
+            return levels[index]
+        return {"sine": Scenario("sine", f"{f:g} Hz sine over 10–90 % of the output range after a "
+                                         f"raised-cosine approach", self.duration_s, sine),
+                "staircase": Scenario("staircase", f"seven steps of {self.step_s:g} s over the output range, "
+                                                   f"from rest",
+                                      self.step_s * len(levels), staircase)}
+
+    def bench(self) -> Bench:
+        """The actuator as a :class:`Bench`."""
+        controllers = {
+            "pid": ControllerSpec("pid", "PID, gains tuned on the nominal model",
+                                  lambda c: self.build_pid(c, False), ("model", "pid")),
+            "inverse-ff-pid": ControllerSpec("inverse-ff-pid", "inverse hysteresis feed-forward + PID, gains tuned "
+                                             "on the nominal model", lambda c: self.build_pid(c, True),
+                                             ("model", "inverse_ff_pid")),
+            "nmpc": ControllerSpec("nmpc", "NMPC on the smoothed identified model, inverse warm start",
+                                   self.build_nmpc, ("model", "nmpc", "smoothing", "solver")),
+        }
+        return Bench(name=self.name, description=self.description, paper="", output_name=self.output_name,
+                     units=self.units, input_units=self.input_units, sample_period=self.sample_period,
+                     scenarios=self.scenarios(), controllers=controllers, defaults=self.defaults,
+                     make_plant=self.make_plant, plant_groups=("plant", "model"), output_range=self.output_range,
+                     input_bounds=self.input_bounds,
+                     loop=("input", "hysteresis_output", f"input [{self.input_units}]",
+                           f"hysteresis output [{self.units}]"),
+                     default_scenario="sine", source=str(self.path))
+
+
+def cache_dir() -> Path:
+    """Where tuned gains are kept: ``$HYSTMPC_CACHE_DIR``, else ``$XDG_CACHE_HOME/hystmpc``
+    (``~/.cache/hystmpc``)."""
+    if os.environ.get("HYSTMPC_CACHE_DIR"):
+        return Path(os.environ["HYSTMPC_CACHE_DIR"])
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "hystmpc"
+
+
+def _flatten(table: dict, prefix: str = ""):
+    for key, value in table.items():
+        if isinstance(value, dict):
+            yield from _flatten(value, f"{prefix}{key}.")
+        else:
+            yield f"{prefix}{key}", value
+
+
+_CACHE: dict[tuple[str, float], Bench] = {}
+
+
+def load_actuator(path: str | Path) -> Bench:
+    """The bench of an actuator file (``ValueError`` naming the bad key); cached per file
+    and modification time, so a command builds and tunes it once."""
+    path = Path(path).resolve()
+    try:
+        stamp = path.stat().st_mtime
+    except OSError:
+        raise ValueError(f"actuator file {path} does not exist") from None
+    key = (str(path), stamp)
+    if key not in _CACHE:
+        _CACHE[key] = ActuatorSpec(path).bench()
+    return _CACHE[key]

@@ -1,0 +1,102 @@
+"""Model documents (``hystmpc.model/1``): an identified hysteresis model as JSON.
+
+``hystmpc identify`` writes them; actuator files name them. Layout (interface.md,
+"Identification")::
+
+    {"schema": "hystmpc.model/1", "family": "prandtl-ishlinskii", "created": ..., "version": ...,
+     "sample_period_s": 0.001, "parameters": {...}, "dynamics": {"kind": "none", ...},
+     "units": {"u": "V", "y": "um"}, "fit": {"rmse": ..., "n_samples": ...},
+     "validation": {...}}
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime as dt
+import json
+from pathlib import Path
+
+import numpy as np
+
+from hystmpc.models.identification import FAMILIES, Identified
+from hystmpc.models.linear_dynamics import KINDS, LinearDynamics
+
+SCHEMA = "hystmpc.model/1"
+
+
+def _plain(value):
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def model_document(identified: Identified, units: dict | None = None, validation: dict | None = None,
+                   version: str = "", source: dict | None = None) -> dict:
+    """The JSON-ready document of an identified model."""
+    doc = {"schema": SCHEMA, "family": identified.family,
+           "created": dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"), "version": version,
+           "sample_period_s": identified.sample_period, "parameters": _plain(identified.parameters),
+           "dynamics": _plain(identified.dynamics.parameters()), "units": dict(units or {"u": "", "y": ""}),
+           "fit": {"rmse": identified.rmse, "n_samples": identified.n_samples,
+                   "options": _plain(identified.options)}}
+    if validation is not None:
+        doc["validation"] = validation
+    if source:
+        doc["source"] = source
+    return doc
+
+
+def dynamics_from(spec: dict, where: str) -> LinearDynamics:
+    """A :class:`LinearDynamics` from a ``dynamics`` table (model document or actuator file)."""
+    if not isinstance(spec, dict):
+        raise ValueError(f"{where}: dynamics must be a table, got {spec!r}")
+    kind = spec.get("kind", "none")
+    if kind not in KINDS:
+        raise ValueError(f"{where}: dynamics.kind = {kind!r}; allowed: {', '.join(KINDS)}")
+    allowed = {f.name for f in dataclasses.fields(LinearDynamics)}
+    unknown = sorted(set(spec) - allowed)
+    if unknown:
+        raise ValueError(f"{where}: unknown dynamics key {unknown[0]!r}; allowed: {', '.join(sorted(allowed))}")
+    try:
+        return LinearDynamics(**spec)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: dynamics: {exc}") from None
+
+
+def read_model_document(source: str | Path | dict, sample_period: float | None = None) -> Identified:
+    """The model of a document (a path or the parsed dict); ``ValueError`` naming what is
+    wrong. ``sample_period`` replaces the document's (a creep model is discretised there)."""
+    where = "model document"
+    if not isinstance(source, dict):
+        where = f"model file {source}"
+        try:
+            source = json.loads(Path(source).read_text())
+        except FileNotFoundError:
+            raise ValueError(f"{where}: no such file") from None
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise ValueError(f"{where}: not a readable JSON document ({exc})") from None
+    if not isinstance(source, dict) or source.get("schema") != SCHEMA:
+        found = source.get("schema") if isinstance(source, dict) else type(source).__name__
+        raise ValueError(f"{where}: schema is {found!r}, expected {SCHEMA!r}")
+    family = source.get("family")
+    if family not in FAMILIES:
+        raise ValueError(f"{where}: family {family!r}; allowed: {', '.join(FAMILIES)}")
+    parameters = source.get("parameters")
+    if not isinstance(parameters, dict):
+        raise ValueError(f"{where}: 'parameters' must be a table of the family's parameters")
+    period = sample_period if sample_period is not None else source.get("sample_period_s", 1.0)
+    identified = Identified(family, parameters, dynamics_from(source.get("dynamics", {"kind": "none"}), where),
+                            float(period))
+    try:
+        identified.hysteresis()
+    except KeyError as exc:
+        raise ValueError(f"{where}: parameter {exc.args[0]!r} of family {family} is missing") from None
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: bad {family} parameters: {exc}") from None
+    fit = source.get("fit", {})
+    identified.rmse, identified.n_samples = fit.get("rmse", float("nan")), fit.get("n_samples", 0)
+    return identified

@@ -1,0 +1,118 @@
+"""The linear block after a hysteresis: none, first order or second order, with a dead time.
+
+Unity static gain (the hysteresis carries the gain), so the output at rest equals the
+hysteresis output. :meth:`LinearDynamics.dynamics` gives the
+:class:`~hystmpc.models.prediction.Dynamics` both the prediction model and the simulated
+plant are built from; :meth:`LinearDynamics.response` the exact zero-order-hold response
+identification fits.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hystmpc.models.prediction import Dynamics
+
+KINDS = ("none", "first-order", "second-order")
+
+
+@dataclass(frozen=True)
+class LinearDynamics:
+    """``y = G(s) h`` delayed by ``delay_samples`` samples of the input."""
+
+    kind: str = "none"
+    """One of :data:`KINDS`."""
+    time_constant: float = 0.01
+    """First order: τ (s) of ``τ y' = h − y``."""
+    natural_frequency_hz: float = 100.0
+    """Second order: f_n (Hz) of ``y'' = ω_n² (h − y) − 2 ζ ω_n y'``."""
+    damping: float = 0.5
+    """Second order: ζ."""
+    delay_samples: int = 0
+    """Dead time between the input and the hysteresis (samples)."""
+
+    def __post_init__(self):
+        if self.kind not in KINDS:
+            raise ValueError(f"dynamics kind {self.kind!r} is not one of {', '.join(KINDS)}")
+        for name in ("time_constant", "natural_frequency_hz", "damping"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be finite and > 0, got {value}")
+        if not (isinstance(self.delay_samples, int) and 0 <= self.delay_samples <= 1000):
+            raise ValueError(f"delay_samples must be an integer in [0, 1000], got {self.delay_samples}")
+
+    def parameters(self) -> dict:
+        """The named parameters of this kind (for model and result documents)."""
+        kind = {"none": {}, "first-order": {"time_constant": self.time_constant},
+                "second-order": {"natural_frequency_hz": self.natural_frequency_hz, "damping": self.damping}}
+        return {"kind": self.kind, **kind[self.kind], "delay_samples": self.delay_samples}
+
+    def state_space(self) -> tuple[np.ndarray, np.ndarray]:
+        """Continuous ``(A, B)`` with state ``[y]`` or ``[y, y']`` and input ``h``."""
+        if self.kind == "first-order":
+            return np.array([[-1.0 / self.time_constant]]), np.array([1.0 / self.time_constant])
+        wn, zeta = 2 * np.pi * self.natural_frequency_hz, self.damping
+        return np.array([[0.0, 1.0], [-wn**2, -2 * zeta * wn]]), np.array([0.0, wn**2])
+
+    def discrete(self, sample_period: float, hold: bool = False) -> Dynamics | None:
+        """The block as discrete :class:`Dynamics`, exact for ``h`` held over each sample
+        (zero-order hold, which is what an input-driven hysteresis gives).
+
+        For ``none``: None, or with ``hold`` one state that holds ``h`` until the next sample
+        (the same output; a creep model needs its output to be a state)."""
+        if self.kind == "none":
+            if not hold:
+                return None
+            return Dynamics(("output",), lambda x, u, h, d: [h], output=lambda x, h: x[0],
+                            steady_input=lambda y: y, discrete=True)
+        from scipy.linalg import expm
+
+        a, b = self.state_space()
+        n = len(b)
+        block = np.zeros((n + 1, n + 1))
+        block[:n, :n], block[:n, n] = a * sample_period, b * sample_period
+        phi = expm(block)
+        ad, bd = phi[:n, :n], phi[:n, n]
+        names = ("output",) if n == 1 else ("output", "rate")
+        return Dynamics(names, lambda x, u, h, d: [sum(ad[i, j] * x[j] for j in range(n)) + bd[i] * h
+                                                   for i in range(n)],
+                        output=lambda x, h: x[0], steady_input=lambda y: y, discrete=True)
+
+    def dynamics(self) -> Dynamics | None:
+        """The block as continuous :class:`Dynamics` (None for ``none``)."""
+        if self.kind == "first-order":
+            tau = self.time_constant
+            return Dynamics(("output",), lambda x, u, h, d: [(h - x[0]) / tau], output=lambda x, h: x[0],
+                            steady_input=lambda y: y)
+        if self.kind == "second-order":
+            wn, zeta = 2 * np.pi * self.natural_frequency_hz, self.damping
+            return Dynamics(("output", "rate"),
+                            lambda x, u, h, d: [x[1], wn**2 * (h - x[0]) - 2 * zeta * wn * x[1]],
+                            output=lambda x, h: x[0], steady_input=lambda y: y)
+        return None
+
+    def lag(self) -> float:
+        """Low-frequency group delay (s) of the block, dead time not included (a feed-forward's preview)."""
+        return {"none": 0.0, "first-order": self.time_constant,
+                 "second-order": 2 * self.damping / (2 * np.pi * self.natural_frequency_hz)}[self.kind]
+
+    def response(self, h, sample_period: float) -> np.ndarray:
+        """Output measured at each sample for the hysteresis output ``h_k`` held from that
+        sample on (zero-order hold; so ``y_k`` depends on ``h_{k-1}`` and earlier), from rest
+        at zero, after the dead time."""
+        from scipy.signal import cont2discrete, lfilter
+
+        h = np.asarray(h, float)
+        if self.delay_samples:
+            h = np.concatenate((np.full(self.delay_samples, h[0] if len(h) else 0.0), h))[: len(h)]
+        if self.kind == "none":
+            return np.concatenate((h[:1], h[:-1]))
+        if self.kind == "first-order":
+            num, den = [1.0], [self.time_constant, 1.0]
+        else:
+            wn = 2 * np.pi * self.natural_frequency_hz
+            num, den = [wn**2], [1.0, 2 * self.damping * wn, wn**2]
+        b, a, _ = cont2discrete((num, den), sample_period, method="zoh")
+        return lfilter(np.ravel(b), np.ravel(a), h)

@@ -1,0 +1,61 @@
+"""A hysteresis model seen through a gain: ``y = gain · H[u]``.
+
+The parametric operator of katalenic2013 maps an input to an output in the input's own
+units (``v ≈ u ± p1``); a user's actuator measures something else (µm, N). ``Scaled`` puts
+the gain between them and keeps the model's whole shape (exact step, smooth step, inverse).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from hystmpc.models.base import SteppedModel, smooth_function, symbolic
+
+
+@dataclass(frozen=True)
+class Scaled(SteppedModel):
+    """``gain · inner``: output scaled, input and state unchanged."""
+
+    inner: object
+    """Any :class:`hystmpc.models.base.HysteresisModel`."""
+    gain: float = 1.0
+    """Output per inner output unit, != 0."""
+
+    def __post_init__(self):
+        if not (np.isfinite(self.gain) and self.gain != 0):
+            raise ValueError(f"gain must be finite and != 0, got {self.gain}")
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        """The inner model's state."""
+        return tuple(self.inner.state_names)
+
+    def initial_state(self, u0: float = 0.0) -> np.ndarray:
+        """The inner model's relaxed state."""
+        return self.inner.initial_state(u0)
+
+    def output(self, state):
+        """``gain ·`` the inner output (NumPy or CasADi)."""
+        y = self.gain * self.inner.output(state)
+        return y if symbolic(y) else float(y)
+
+    def step(self, state, u: float) -> tuple[np.ndarray, float]:
+        """Exact step; returns ``(state, gain · y_inner)``."""
+        state, y = self.inner.step(state, u)
+        return state, float(self.gain * y)
+
+    def smooth_step(self, eps: float, direction_eps: float | None = None) -> ca.Function:
+        """The inner smooth step with its output scaled."""
+        inner = self.inner.smooth_step(eps, direction_eps)
+
+        def expressions(x, u):
+            x_next, y = inner(x, u)
+            return x_next, self.gain * y
+        return smooth_function("scaled_smooth", len(self.state_names), expressions)
+
+    def inverse_step(self, state, y_target: float) -> tuple[np.ndarray, float]:
+        """The inner inverse of ``y_target / gain``."""
+        return self.inner.inverse_step(state, float(y_target) / self.gain)

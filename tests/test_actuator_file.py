@@ -1,0 +1,114 @@
+"""Your own actuator from the command line: the piezo example of docs/your-actuator.md from
+measured records to identify, an actuator file, compare and codegen; every command takes
+the file; malformed files are refused with one line naming the key."""
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from hystmpc.experiments.cli import main
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "docs" / "examples" / "piezo"
+IDENTIFY = ["identify", "prandtl-ishlinskii", "slow.csv", "--validate", "validate.csv", "--dynamics", "second-order",
+            "--dynamics-data", "fast.csv", "--units", "um", "--input-units", "V", "--out", "piezo_model.json"]
+
+
+@pytest.fixture(scope="module")
+def piezo(tmp_path_factory):
+    """The example folder with the records and the actuator file; the model identified afresh."""
+    folder = tmp_path_factory.mktemp("piezo")
+    for name in ("slow.csv", "validate.csv", "fast.csv", "piezo.toml"):
+        shutil.copy(EXAMPLE / name, folder / name)
+    argv = [a if not a.endswith((".csv", ".json")) else str(folder / a) for a in IDENTIFY]
+    assert main(argv + ["--quiet"]) == 0
+    return folder
+
+
+def test_the_example_is_short():
+    """The actuator file and the commands of the worked example are under 40 lines together."""
+    doc = (EXAMPLE.parents[1] / "your-actuator.md").read_text()
+    commands = [line for line in doc.splitlines() if line.startswith("hystmpc ")]
+    toml = [line for line in (EXAMPLE / "piezo.toml").read_text().splitlines() if line.strip()]
+    assert len(commands) >= 3 and len(commands) + len(toml) < 40, (len(commands), len(toml))
+    assert " ".join(IDENTIFY) in "\n".join(commands)
+
+
+def test_identified_model_fits_the_records(piezo):
+    doc = json.loads((piezo / "piezo_model.json").read_text())
+    assert doc["family"] == "prandtl-ishlinskii" and doc["dynamics"]["kind"] == "second-order"
+    # the truth (docs/examples/piezo/make_data.py): 180 Hz, damping 0.25, one sample of dead time
+    assert doc["dynamics"]["delay_samples"] == 1
+    assert abs(doc["dynamics"]["natural_frequency_hz"] / 180 - 1) < 0.05
+    assert doc["validation"]["rmse"] < 0.05  # um; noise 0.01 plus the stiffening no PI model has
+
+
+def test_nmpc_halves_the_error_of_inverse_feedforward_pid(piezo, capsys):
+    out = piezo / "compare"
+    assert main(["compare", str(piezo / "piezo.toml"), "--out", str(out), "--no-plots"]) == 0
+    runs = {(r["scenario"], r["controller"]): r for r in json.loads((out / "results.json").read_text())["runs"]}
+    for scenario in ("sine", "staircase"):
+        nmpc, ff = runs[scenario, "nmpc"]["metrics"]["rmse"], runs[scenario, "inverse-ff-pid"]["metrics"]["rmse"]
+        assert runs[scenario, "nmpc"]["solver"]["failures"] == 0
+        assert nmpc <= 0.5 * ff, (scenario, nmpc, ff)
+    gains = runs["sine", "pid"]["parameters"]["pid"]
+    assert gains["ki"] > 0  # tuned, not the zero default
+
+
+def test_run_takes_a_reference_file_without_a_scenario(piezo, tmp_path):
+    ref = tmp_path / "ref.csv"
+    ref.write_text("t,displacement\n0,0\n0.05,4\n0.1,4\n")
+    out = tmp_path / "run"
+    assert main(["run", str(piezo / "piezo.toml"), "--reference", str(ref), "--controller", "nmpc", "--out",
+                 str(out), "--no-plots", "--quiet"]) == 0
+    (run,) = json.loads((out / "results.json").read_text())["runs"]
+    assert run["scenario"] == "ref" and run["metrics"]["n_samples"] == 100
+
+
+def test_list_shows_an_actuator_file(piezo, capsys):
+    assert main(["list", str(piezo / "piezo.toml")]) == 0
+    out = capsys.readouterr().out
+    assert "piezo-stage" in out and "sine, staircase" in out and "inverse_ff_pid" in out
+
+
+@pytest.mark.slow
+def test_sweep_codegen_and_speed_take_an_actuator_file(piezo, tmp_path):
+    spec = piezo / "sweep.toml"
+    spec.write_text('bench = "piezo.toml"\nscenarios = ["sine"]\ncontrollers = ["inverse-ff-pid", "nmpc"]\n'
+                    'duration = 0.1\n[perturb]\n"plant.mismatch" = 0.5\nsamples = 2\n')
+    assert main(["sweep", str(spec), "--out", str(tmp_path / "sweep"), "--workers", "1", "--no-plots",
+                 "--quiet"]) == 0
+    summary = json.loads((tmp_path / "sweep" / "summary.json").read_text())
+    assert summary["runs_failed"] == 0 and summary["runs_recorded"] == 4
+    report = tmp_path / "codegen.json"
+    assert main(["codegen", str(piezo / "piezo.toml"), "--verify", "--duration", "0.1", "--out",
+                 str(tmp_path / "c"), "--json", str(report), "--quiet"]) == 0
+    assert json.loads(report.read_text())["max_input_difference"] == 0.0
+    assert main(["speed", str(piezo / "piezo.toml"), "--variants", "rti", "--duration", "0.1", "--out",
+                 str(tmp_path / "speed"), "--quiet"]) == 0
+
+
+def _actuator(folder: Path, text: str) -> str:
+    path = folder / "bad.toml"
+    path.write_text(text)
+    return str(path)
+
+
+GOOD = (EXAMPLE / "piezo.toml").read_text()
+
+
+@pytest.mark.parametrize("text, needle", [
+    ("colour = 'red'\n" + GOOD, "unknown key 'colour'"),
+    (GOOD.replace("[sensor]", "[sensor]\nnoise = 1"), "unknown key 'sensor.noise'"),
+    (GOOD.replace('file = "piezo_model.json"', 'file = "missing.json"'), "model.file: model file"),
+    (GOOD.replace("input_bounds = [0.0, 100.0]", "input_bounds = [100.0, 0.0]"), "input_bounds must be"),
+    (GOOD.replace("sample_period = 0.001", "sample_period = -1"), "sample_period must be"),
+    (GOOD.replace("[plant]", "[plant]\nmismatch = 3") .replace("mismatch = 0.05\n", ""), "mismatch"),
+    (GOOD.replace("[sensor]", "[nmpc]\nhorizon = 1\n[sensor]"), "nmpc.horizon"),
+    ("name = 'x'\n[model\n", "not valid TOML"),
+])
+def test_malformed_actuator_files_exit_2_naming_the_key(piezo, capsys, text, needle):
+    assert main(["list", _actuator(piezo, text)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and needle in err, err
