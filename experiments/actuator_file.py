@@ -87,6 +87,8 @@ class ActuatorPlant:
             raise ValueError(f"mismatch must be in [0, 0.5], got {self.mismatch}")
         if not (np.isfinite(self.noise) and self.noise >= 0):
             raise ValueError(f"noise must be finite and >= 0, got {self.noise}")
+        if not (isinstance(self.seed, int) and self.seed >= 0):
+            raise ValueError(f"seed must be an integer >= 0, got {self.seed}")
 
 
 @dataclass(frozen=True)
@@ -174,8 +176,10 @@ class ActuatorSpec:
             self.dynamics = dynamics_from(raw["dynamics"], f"{where}: [dynamics]")
         sensor, plant = raw.get("sensor", {}), raw.get("plant", {})
         self.noise = self._number(sensor, "noise_std", 0.0, key="sensor.noise_std")
-        self.plant = ActuatorPlant(self._number(plant, "mismatch", 0.05, key="plant.mismatch"),
-                                   int(self._number(plant, "seed", 0, key="plant.seed")), self.noise)
+        seed = plant.get("seed", 0)
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            raise self._fail("plant.seed", f"must be an integer >= 0, got {seed!r}")
+        self.plant = ActuatorPlant(self._number(plant, "mismatch", 0.05, key="plant.mismatch"), seed, self.noise)
         scen = raw.get("scenarios", {})
         self.sine_hz = self._number(scen, "sine_hz", self._default_sine_hz(), positive=True, key="scenarios.sine_hz")
         self.step_s = self._number(scen, "step_s", 0.5 / self.sine_hz, positive=True, key="scenarios.step_s")

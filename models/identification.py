@@ -359,7 +359,7 @@ def fit_power_function(u, y, sample_period: float, knots: int = 10, ascending_s:
     s_d = np.asarray(descending_s, float) if len(descending_s) else np.linspace(lo, hi, knots)
     for name, s in (("ascending_s", s_a), ("descending_s", s_d)):
         if len(s) < 2 or np.any(np.diff(s) <= 0):
-            raise ValueError(f"{name} must be at least two increasing knots, got {list(s)}")
+            raise ValueError(f"{name} must be at least two increasing knots, got {[float(v) for v in s]}")
     na, nd = len(s_a), len(s_d)
     tied = s_a[0] == s_d[0] and s_a[-1] == s_d[-1] and nd >= 3
     rising = np.concatenate(([True], np.diff(u_in) > 0))
