@@ -435,7 +435,7 @@ class ActuatorSpec:
                      units=self.units, input_units=self.input_units, sample_period=self.sample_period,
                      scenarios=self.scenarios(), controllers=controllers, defaults=self.defaults,
                      make_plant=self.make_plant, plant_groups=("plant", "model"), output_range=self.output_range,
-                     input_bounds=self.input_bounds,
+                     input_bounds=self.input_bounds, input_rate=self.input_rate,
                      loop=("input", "hysteresis_output", f"input [{self.input_units}]",
                            f"hysteresis output [{self.units}]"),
                      default_scenario="sine", source=str(self.path))

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from hystmpc.experiments.config import apply_overrides
-from hystmpc.experiments.runner import Controller, Labels, RunResult, Scenario, simulate
+from hystmpc.experiments.runner import Controller, InputGuard, Labels, RunResult, Scenario, simulate
 
 MULTIPLE_SHOOTING = {f"solver.gn.{key}": "solver gn solves single-shooting problems; this bench's NMPC is "
                      "multiple shooting (use ipopt, sqp, rti or rti-c)" for key in ("max_iter", "tol")}
@@ -64,6 +64,10 @@ class Bench:
     """References outside this range are rejected."""
     paper_figures: dict[tuple[str, str], dict[str, float]] = field(default_factory=dict)
     input_bounds: tuple[float, float] = (-np.inf, np.inf)
+    """The actuator's physical input range: the plant guard clips any controller to it,
+    whatever ``--set model.*`` says."""
+    input_rate: float = np.inf
+    """The actuator's largest input change per sample (the guard's rate; ``inf``: none)."""
     loop: tuple[str, str, str, str] | None = None
     """Hysteresis-loop plot: (truth key on x, truth key on y, x label, y label)."""
     default_scenario: str = ""
@@ -75,6 +79,11 @@ class Bench:
     """Where the bench comes from when it is not built in: an actuator file's path, or a
     plugin's entry point (``module:attribute``); :func:`hystmpc.experiments.benches.get_bench`
     finds it again by this (sweep workers do)."""
+
+    @property
+    def guard(self) -> InputGuard:
+        """The plant guard of every run on this bench (:attr:`input_bounds`, :attr:`input_rate`)."""
+        return InputGuard(*self.input_bounds, self.input_rate)
 
     @property
     def labels(self) -> Labels:
@@ -155,7 +164,7 @@ class Bench:
         prepared = self.prepare(scenario, controller, config) if prepared is None else prepared
         from hystmpc.experiments.config import describe
         run = simulate(prepared.plant, prepared.controller, prepared.scenario, duration, seed, name=controller,
-                       labels=self.labels, progress=progress)
+                       labels=self.labels, progress=progress, guard=self.guard)
         run.parameters = describe(prepared.config)
         run.paper = self.paper_figures.get((prepared.scenario.name, controller))
         run.bench = self.name

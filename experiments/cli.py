@@ -7,15 +7,19 @@ what is allowed; 1 anything else.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime as dt
 import json
 import logging
 import os
+import shutil
 import sys
+import tempfile
 from pathlib import Path
 
 from hystmpc.experiments.bench import Bench
 from hystmpc.experiments.benches import BENCH_NAMES, DEFAULT_BENCH, all_bench_names, get_bench
+from hystmpc.experiments.limits import check_horizons, check_run_samples, run_samples
 from hystmpc.experiments.reference import load_reference
 from hystmpc.experiments.report import comparison_table, results_document, write_json, write_run_csv
 from hystmpc.experiments.runner import RunResult
@@ -35,9 +39,16 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
+FORCE_HELP = "run beyond the work limits (horizon 200, 1,000,000 samples per run; interface.md)"
+JSON_HELP = "also write the {} to this file ('-': standard output, instead of the table)"
+
+
 def _add_run_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--out", help="results folder (default results/<bench>/<timestamp>)")
-    p.add_argument("--json", dest="json_file", help="also write the result document to this file")
+    p.add_argument("--out", help="results folder (default results/<bench>/<timestamp>); an existing, non-empty "
+                   "one is refused unless --overwrite")
+    p.add_argument("--overwrite", action="store_true", help="write into an --out folder that already holds files")
+    p.add_argument("--json", dest="json_file", help=JSON_HELP.format("result document"))
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--reference", help="CSV with columns t and the bench's reference (or 'ref')")
     p.add_argument("--duration", type=float, help="run length in seconds (default: the scenario's)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
@@ -70,8 +81,12 @@ def build_parser() -> argparse.ArgumentParser:
     p_sw.add_argument("--executor", default="local", help="local (process pool, default) or dask")
     p_sw.add_argument("--scheduler", metavar="ADDR", help="address of a running Dask scheduler (with --executor dask)")
     p_sw.add_argument("--resume", action="store_true", help="finish the sweep in --out, skipping recorded runs")
-    p_sw.add_argument("--out", help="results folder (default results/<bench>/sweep-<timestamp>)")
-    p_sw.add_argument("--json", dest="json_file", help="also write the summary to this file")
+    p_sw.add_argument("--retry-failed", action="store_true", help="with --resume: also redo the runs that failed")
+    p_sw.add_argument("--out", help="results folder (default results/<bench>/sweep-<timestamp>); must be new or "
+                      "empty, or hold the sweep to --resume")
+    p_sw.add_argument("--json", dest="json_file", help=JSON_HELP.format("summary"))
+    p_sw.add_argument("--force", action="store_true", help="run beyond the work limits (horizon 200, 1,000,000 "
+                      "samples per run, 10,000 runs and 20,000,000 samples per sweep)")
     p_sw.add_argument("--duration", type=float, help="run length in seconds (default: the spec's, else the scenario's)")
     p_sw.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                       help="parameter override for every run, after the spec's own 'set'")
@@ -85,14 +100,18 @@ def build_parser() -> argparse.ArgumentParser:
                       help="replay the default scenario with the in-process and the compiled solver")
     p_cg.add_argument("--duration", type=float, help="length of the verification run (s)")
     p_cg.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
-    p_cg.add_argument("--json", dest="json_file", help="also write the report to this file")
+    p_cg.add_argument("--json", dest="json_file", help=JSON_HELP.format("report"))
+    p_cg.add_argument("--force", action="store_true", help=FORCE_HELP)
     p_cg.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p_sp = sub.add_parser("speed", help="per-step compute of every solver variant on the default scenario")
     p_sp.add_argument("bench", help=BENCH_HELP)
     p_sp.add_argument("--variants", help="comma-separated solver variants (default: the bench's own solver, "
                       "then ipopt, sqp, rti, rti-c)")
     p_sp.add_argument("--duration", type=float, help="run length (s, default: the scenario's)")
-    p_sp.add_argument("--out", help="results folder (default results/<bench>/speed-<timestamp>)")
+    p_sp.add_argument("--out", help="results folder (default results/<bench>/speed-<timestamp>); an existing, "
+                      "non-empty one is refused unless --overwrite")
+    p_sp.add_argument("--overwrite", action="store_true", help="write into an --out folder that already holds files")
+    p_sp.add_argument("--force", action="store_true", help=FORCE_HELP)
     p_sp.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     p_sp.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p_id = sub.add_parser("identify", help="fit a hysteresis model to measured data (or a bench's own identification)")
@@ -176,9 +195,117 @@ def _identify_bench(args) -> int:
 CODEGEN_SOLVERS = ("rti",)
 
 
+def _timestamped(folder: Path, prefix: str = "") -> Path:
+    """A new folder name under ``folder``: ``<prefix><UTC timestamp>``, suffixed if taken."""
+    stamp = prefix + dt.datetime.now(dt.UTC).strftime("%Y%m%dT%H%M%SZ")
+    path, n = folder / stamp, 1
+    while path.exists():
+        n += 1
+        path = folder / f"{stamp}-{n}"
+    return path
+
+
+def _output_folder(path: Path, option: str = "--out", overwrite: bool = True) -> bool:
+    """Create ``path`` (or check it) before any work; returns whether it was created.
+
+    ``UsageError`` for a file, a folder that cannot be written, or (unless ``overwrite``)
+    a folder that already holds files.
+    """
+    if path.exists() and not path.is_dir():
+        raise UsageError(f"{option} {str(path)!r} is a file; give a folder")
+    if not overwrite and path.is_dir() and any(path.iterdir()):
+        raise UsageError(f"{option} {str(path)!r} already holds files; pass --overwrite to write into it, or "
+                         "choose another folder")
+    created = not path.exists()
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path):
+            pass
+    except OSError as exc:
+        raise UsageError(f"{option} {str(path)!r} cannot be written ({exc.strerror or type(exc).__name__})") from None
+    return created
+
+
+def _json_target(value: str | None) -> Path | str | None:
+    """``--json``'s file, checked (its folder created) before any work; ``'-'`` is standard output."""
+    if value is None or value == "-":
+        return value
+    path = Path(value)
+    if path.is_dir():
+        raise UsageError(f"--json {value!r} is a folder; give a file name (or '-' for standard output)")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path.parent):
+            pass
+    except OSError as exc:
+        raise UsageError(f"--json {value!r} cannot be written ({exc.strerror or type(exc).__name__})") from None
+    return path
+
+
+def _write_json_target(doc: dict, target: Path | str | None) -> None:
+    if target == "-":
+        json.dump(doc, sys.stdout, indent=2, allow_nan=False)
+        sys.stdout.write("\n")
+    elif target is not None:
+        write_json(doc, target)
+
+
+@contextlib.contextmanager
+def _cleanup_on_error(folder: Path, created: bool):
+    """Remove ``folder`` if the work in it fails and this command created it: nothing half-written stays."""
+    try:
+        yield
+    except BaseException:
+        if created:
+            shutil.rmtree(folder, ignore_errors=True)
+        raise
+
+
+@contextlib.contextmanager
+def _solver_log(path: Path):
+    """Solver and CasADi warnings (written to Python's stderr) go to ``path``, not the terminal."""
+    with open(path, "a") as log, contextlib.redirect_stderr(log):
+        yield
+
+
+def _report_solver_log(path: Path, quiet: bool) -> None:
+    if not path.exists():
+        return
+    with path.open() as log:
+        lines = sum(1 for _ in log)
+    if not lines:
+        path.unlink()
+    elif not quiet:
+        logging.getLogger("hystmpc").info(f"{lines} lines of solver warnings written to {path}")
+
+
+def _seed(value: int) -> int:
+    if value < 0:
+        raise UsageError(f"--seed must be an integer >= 0, got {value}")
+    return value
+
+
+def _samples(duration: float, sample_period: float, what: str, force: bool) -> int:
+    try:
+        n = run_samples(duration, sample_period, what)
+        check_run_samples(n, what if what != "--duration" else f"--duration {duration:g}", force)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    return n
+
+
 def _positive_duration(value) -> None:
-    if value is not None and not value > 0:
-        raise UsageError(f"--duration must be > 0 seconds, got {value}")
+    if value is not None and not (value > 0 and value != float("inf")):
+        raise UsageError(f"--duration must be a finite number of seconds > 0, got {value}")
+
+
+def _work_config(bench: Bench, overrides: list[str], force: bool):
+    config = _config(bench, overrides)
+    try:
+        check_horizons(config, force)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    return config
 
 
 def _codegen(args) -> int:
@@ -188,15 +315,19 @@ def _codegen(args) -> int:
         raise UsageError(f"--solver {args.solver!r} cannot be code-generated yet; "
                          f"allowed: {', '.join(CODEGEN_SOLVERS)}")
     _positive_duration(args.duration)
-    config = _config(bench, args.overrides)
+    config = _work_config(bench, args.overrides, args.force)
+    if args.duration is not None:
+        _samples(args.duration, bench.sample_period, "--duration", args.force)
     out = Path(args.out) if args.out else Path("codegen") / bench.name
-    try:
-        report = codegen(bench, config, out, args.verify, args.duration)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
-    if args.json_file:
-        Path(args.json_file).write_text(json.dumps(report, indent=1) + "\n")
-    if not args.quiet:
+    json_target = _json_target(args.json_file)
+    created = _output_folder(out)  # a build folder: its files are replaced
+    with _cleanup_on_error(out, created):
+        try:
+            report = codegen(bench, config, out, args.verify, args.duration)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+    _write_json_target(report, json_target)
+    if not args.quiet and json_target != "-":
         print(f"C solver written and built in {out}: {', '.join(report['files'])}")
         if args.verify:
             c = report["standalone"]
@@ -212,24 +343,29 @@ def _speed(args) -> int:
     from hystmpc.experiments.report import version
     bench = _bench(args.bench)
     _positive_duration(args.duration)
-    config = _config(bench, args.overrides)
+    config = _work_config(bench, args.overrides, args.force)
     if args.variants:
         variants = args.variants.split(",")
         _check_names("solver variant", variants, SOLVERS)
     else:
         own = config["nmpc"].solver if "nmpc" in config else "ipopt"
         variants = list(dict.fromkeys([own, "ipopt", "sqp", "rti", "rti-c"]))
-    out = Path(args.out) if args.out else Path("results") / bench.name / ("speed-" + dt.datetime.now(
-        dt.UTC).strftime("%Y%m%dT%H%M%SZ"))
-    try:
-        result = speed(bench, config, variants, args.duration, out / "codegen")
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
+    scenario = bench.scenario(bench.default_scenario) if bench.default_scenario else None
+    if scenario is not None:
+        _samples(args.duration or scenario.duration, bench.sample_period, "--duration", args.force)
+    out = Path(args.out) if args.out else _timestamped(Path("results") / bench.name, "speed-")
+    created = _output_folder(out, overwrite=args.overwrite)
+    with _cleanup_on_error(out, created):
+        try:
+            with _solver_log(out / "solver.log"):
+                result = speed(bench, config, variants, args.duration, out / "codegen")
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
     result.update({"schema": "hystmpc.speed/1", "version": version(), "overrides": list(args.overrides)})
-    out.mkdir(parents=True, exist_ok=True)
     (out / "speed.json").write_text(json.dumps(result, indent=1) + "\n")
     table = speed_table(result)
     (out / "speed.md").write_text(table + "\n")
+    _report_solver_log(out / "solver.log", args.quiet)
     if not args.quiet:
         print(table)
         print(f"\nresults: {out / 'speed.json'}")
@@ -248,23 +384,30 @@ def _sweep(args) -> int:
         raise UsageError(f"--workers must be >= 1, got {args.workers}")
     if args.resume and not args.out:
         raise UsageError("--resume needs --out DIR: the folder of the sweep to finish")
+    if args.retry_failed and not args.resume:
+        raise UsageError("--retry-failed redoes the failed runs of a sweep: use it with --resume and --out DIR")
+    json_target = _json_target(args.json_file)
     try:
-        spec = load_spec(args.spec, args.overrides, args.duration)
-        out = Path(args.out) if args.out else Path("results") / _bench(spec.bench).name / ("sweep-" + dt.datetime.now(
-            dt.UTC).strftime("%Y%m%dT%H%M%SZ"))
+        spec = load_spec(args.spec, args.overrides, args.duration, force=args.force)
+        out = Path(args.out) if args.out else _timestamped(Path("results") / _bench(spec.bench).name, "sweep-")
         outcome = run_sweep(spec, out, workers=args.workers, executor=args.executor, scheduler=args.scheduler,
                             resume=args.resume, plots=not args.no_plots, quiet=args.quiet,
-                            spec_text=Path(args.spec).read_text())
+                            spec_text=Path(args.spec).read_text(), retry_failed=args.retry_failed)
     except SpecError as exc:
         raise UsageError(str(exc)) from None
-    if args.json_file:
-        Path(args.json_file).write_text(json.dumps(outcome.summary, indent=1) + "\n")
-    if not args.quiet:
-        print(summary_table(outcome.summary, _bench(spec.bench).units))
+    _write_json_target(outcome.summary, json_target)
+    _report_solver_log(out / "solver.log", args.quiet)
+    summary = outcome.summary
+    if not args.quiet and json_target != "-":
+        print(summary_table(summary, _bench(spec.bench).units))
         print(f"\n{outcome.ran} runs done in {outcome.wall_s:.1f} s ({outcome.skipped} already recorded), "
-              f"{outcome.summary['runs_failed']} failed in all; results: {out / 'summary.json'}")
+              f"{summary['runs_failed']} failed in all; results: {out / 'summary.json'}")
         if outcome.figures:
             print("figures: " + ", ".join(str(f) for f in outcome.figures))
+    if summary["runs_recorded"] and summary["runs_failed"] == summary["runs_recorded"]:
+        print(f"hystmpc: error: every run of the sweep failed ({summary['runs_failed']}); the causes are in "
+              f"{out / 'records'}", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -298,11 +441,11 @@ def _scenario(bench: Bench, name: str, reference: str | None):
 
 
 def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[str]) -> int:
-    if args.duration is not None and not args.duration > 0:
-        raise UsageError(f"--duration must be > 0 seconds, got {args.duration}")
+    _positive_duration(args.duration)
+    _seed(args.seed)
     if args.reference is not None and len(scenario_names) > 1:
         raise UsageError("--reference replaces one scenario's reference: name one scenario at most")
-    config = _config(bench, args.overrides)
+    config = _work_config(bench, args.overrides, args.force)
     if args.reference is not None and not scenario_names:
         scenarios = [_scenario(bench, None, args.reference)]
     else:
@@ -314,28 +457,21 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
             if key in user_keys:
                 raise UsageError(f"--set {key} conflicts with scenario {scenario.name!r}, which fixes "
                                  f"{condition}; use --reference for other conditions")
-    out = Path(args.out) if args.out else Path("results") / bench.name / dt.datetime.now(
-        dt.UTC).strftime("%Y%m%dT%H%M%SZ")
-    total = sum(int(round((args.duration or s.duration) / bench.sample_period)) for s in scenarios) * len(controllers)
-    runs: list[RunResult] = []
-    from tqdm import tqdm
-    with tqdm(total=total, unit="step", disable=True if args.quiet else None, leave=False,
-              dynamic_ncols=True) as bar:
-        for scenario in scenarios:
-            for controller in controllers:
-                bar.set_description(f"{scenario.name} · {controller}")
-                try:
-                    prepared = bench.prepare(scenario, controller, config)
-                except ValueError as exc:  # a setting the controller or plant cannot take
-                    raise UsageError(str(exc)) from None
-                run = bench.run(scenario, controller, seed=args.seed, duration=args.duration, progress=bar.update,
-                                prepared=prepared)
-                runs.append(run)
-                write_run_csv(run, out)
+        if args.reference is not None and args.duration is not None and \
+                args.duration > scenario.duration + 0.5 * bench.sample_period:
+            raise UsageError(f"--duration {args.duration:g} s is longer than the reference file {args.reference!r} "
+                             f"({scenario.duration:g} s); allowed: up to {scenario.duration:g} s")
+    total = sum(_samples(args.duration or s.duration, bench.sample_period,
+                         "--duration" if args.duration else f"scenario {s.name}", args.force)
+                for s in scenarios) * len(controllers)
+    json_target = _json_target(args.json_file)
+    out = Path(args.out) if args.out else _timestamped(Path("results") / bench.name)
+    created = _output_folder(out, overwrite=args.overwrite)
+    with _cleanup_on_error(out, created):
+        runs = _run_all(args, bench, config, scenarios, controllers, out, total)
     doc = results_document(bench.name, runs, command=sys.argv[1:] if sys.argv else None)
     write_json(doc, out / "results.json")
-    if args.json_file:
-        write_json(doc, args.json_file)
+    _write_json_target(doc, json_target)
     table = comparison_table(runs)
     (out / "table.md").write_text(table + "\n")
     figures = []
@@ -348,7 +484,16 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
                 figures.append(error_vs_reference_figure(subset, out / f"{scenario.name}_error.png"))
         if len(runs) > 1:
             figures.append(rmse_figure(runs, out / "rmse.png"))
-    if not args.quiet:
+    _report_solver_log(out / "solver.log", args.quiet)
+    clipped = [r for r in runs if r.guard and r.guard["clips"]]
+    if clipped:  # a warning: shown even with --quiet
+        lo, hi = bench.input_bounds
+        logging.getLogger("hystmpc").warning(
+            f"the plant guard clipped {sum(r.guard['clips'] for r in clipped)} inputs of "
+            f"{', '.join(sorted({r.controller for r in clipped}))} to the bench's input range [{lo:g}, {hi:g}] "
+            f"{bench.input_units}" + (f" and rate {bench.input_rate:g} per sample" if bench.input_rate < float("inf")
+                                      else "") + " (guard clips in the table)")
+    if not args.quiet and json_target != "-":
         print(table)
         print(f"\nresults: {out / 'results.json'}" + (f" and {args.json_file}" if args.json_file else ""))
         if figures:
@@ -365,32 +510,82 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
     return 0
 
 
+def _run_all(args, bench: Bench, config, scenarios, controllers, out: Path, total: int) -> list[RunResult]:
+    runs: list[RunResult] = []
+    from tqdm import tqdm
+    with tqdm(total=total, unit="step", disable=True if args.quiet else None, leave=False,
+              dynamic_ncols=True) as bar:
+        for scenario in scenarios:
+            for controller in controllers:
+                bar.set_description(f"{scenario.name} · {controller}")
+                try:
+                    prepared = bench.prepare(scenario, controller, config)
+                except ValueError as exc:  # a setting the controller or plant cannot take
+                    raise UsageError(str(exc)) from None
+                with _solver_log(out / "solver.log"):
+                    run = bench.run(scenario, controller, seed=args.seed, duration=args.duration,
+                                    progress=bar.update, prepared=prepared)
+                runs.append(run)
+                write_run_csv(run, out)
+    return runs
+
+
 def _list(args) -> int:
+    from hystmpc.experiments.config import key_table
     info = {}
     for name in [args.bench] if args.bench else all_bench_names():
         bench = _bench(name)
         info[bench.name if args.bench else name] = {
             "description": bench.description, "paper": bench.paper, "units": bench.units,
-            "sample_period_s": bench.sample_period, "scenarios": list(bench.scenarios),
+            "input_units": bench.input_units, "sample_period_s": bench.sample_period,
+            "input_bounds": list(bench.input_bounds), "scenarios": list(bench.scenarios),
             "controllers": list(bench.controllers), "parameter_groups": list(bench.defaults())} | (
             {"source": bench.source} if bench.source else {})
+        if args.bench:
+            info[bench.name]["keys"] = [{"key": k, "default": v, "doc": d}
+                                        for k, v, d in key_table(bench.configure())]
     if args.json:
-        print(json.dumps({"benches": info, "solvers": list(SOLVERS), "families": list(FAMILY_NAMES)}, indent=2))
+        from hystmpc.experiments.report import json_safe
+        print(json.dumps(json_safe({"benches": info, "solvers": list(SOLVERS), "families": list(FAMILY_NAMES)}),
+                         indent=2, default=str))
         return 0
     for name, b in info.items():
-        print(f"{name}: {b['description']} [{b['units']}, {1 / b['sample_period_s']:g} Hz]"
-              + (f" ({b['source']})" if "source" in b else ""))
+        lo, hi = b["input_bounds"]
+        print(f"{name}: {b['description']} [{b['units']}, {1 / b['sample_period_s']:g} Hz, input "
+              f"{lo:g}..{hi:g} {b['input_units']}]" + (f" ({b['source']})" if "source" in b else ""))
         print(f"  scenarios:   {', '.join(b['scenarios'])}")
         print(f"  controllers: {', '.join(b['controllers'])}")
-        print(f"  --set groups: {', '.join(b['parameter_groups'])}")
+        if "keys" not in b:
+            print(f"  --set groups: {', '.join(b['parameter_groups'])}")
+            continue
+        print("  --set keys (default, long ones cut: --json has them whole; meaning and units):")
+        width = max(len(k["key"]) for k in b["keys"])
+        for k in b["keys"]:
+            print(f"    {k['key']:<{width}}  {_show(k['default'])}" + (f"  — {k['doc']}" if k["doc"] else ""))
     print(f"solvers (--set nmpc.solver=...): {', '.join(SOLVERS)}")
     print(f"model families (hystmpc identify FAMILY DATA.csv): {', '.join(FAMILY_NAMES)}")
+    if not args.bench:
+        print("'hystmpc list BENCH' shows every --set key of a bench with its default and units")
     return 0
+
+
+def _show(value) -> str:
+    """A default as ``--set`` takes it (tuples comma-separated)."""
+    if isinstance(value, tuple):
+        flat = [v for item in value for v in (item if isinstance(item, tuple) else (item,))]
+        text = ",".join(f"{v:g}" if isinstance(v, float) else str(v) for v in flat)
+        return text if len(text) <= 60 else text[:57] + "..."
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
 
 
 def _log_notices(show: bool) -> None:
     """Notices of long steps (tuning, ...) on stderr as ``hystmpc: ...`` lines, unless ``--quiet``."""
     log = logging.getLogger("hystmpc")
+    for handler in log.handlers:
+        if getattr(handler, "hystmpc", False):
+            handler.stream = sys.stderr  # whatever it is now (setStream would flush the old one: maybe closed)
     if not any(getattr(h, "hystmpc", False) for h in log.handlers):
         handler = logging.StreamHandler()
         handler.hystmpc = True
@@ -434,6 +629,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("hystmpc: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader went away (``hystmpc list pam | head``): stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
     except Exception as exc:  # noqa: BLE001 - anything unexpected: one line, exit 1
         if os.environ.get("HYSTMPC_DEBUG"):
             raise

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import functools
 from typing import Any
 
 MOVED = {
@@ -89,7 +90,8 @@ def _parse(text: str, current: Any, key: str) -> Any:
             return values
     except ValueError:
         if isinstance(current, tuple) and current and isinstance(current[0], tuple):
-            kind = f"comma-separated numbers, {len(current[0])} per point"
+            kind = (f"comma-separated numbers, {len(current[0])} per point (x1,y1,x2,y2,...; the default has "
+                    f"{len(current)} points)")
         elif isinstance(current, tuple):
             kind = f"{len(current)} comma-separated numbers"
         else:
@@ -98,7 +100,8 @@ def _parse(text: str, current: Any, key: str) -> Any:
     return text
 
 
-def _unknown(key: str, config: dict[str, Any]) -> ValueError:
+def unknown_key(key: str, config: dict[str, Any]) -> ValueError:
+    """The error for a key ``config`` does not have: the nearest key, or the group's keys."""
     if key in MOVED:
         return ValueError(f"--set {key} is now {MOVED[key]}")
     group = key.split(".", 1)[0]
@@ -106,8 +109,12 @@ def _unknown(key: str, config: dict[str, Any]) -> ValueError:
         return ValueError(f"unknown --set group {group!r} in {key!r}; allowed groups: {', '.join(config)}")
     fields = [k.split(".", 1)[1] for k in _keys(group, config[group])]
     near = difflib.get_close_matches(key.split(".", 1)[-1], fields, n=1, cutoff=0.6)
-    hint = f"did you mean '{group}.{near[0]}'? " if near else ""
-    return ValueError(f"unknown --set key {key!r}; {hint}keys of group {group}: {', '.join(fields)}")
+    every = "'hystmpc list BENCH' shows every key with its default and units"
+    if near:
+        return ValueError(f"unknown --set key {key!r}; did you mean '{group}.{near[0]}'? ({every})")
+    if len(fields) <= 12:
+        return ValueError(f"unknown --set key {key!r}; keys of group {group}: {', '.join(fields)}")
+    return ValueError(f"unknown --set key {key!r}; group {group} has {len(fields)} keys: {every}")
 
 
 def _replace(obj, path: list[str], text: str, key: str):
@@ -149,12 +156,60 @@ def apply_overrides(config: dict[str, Any], assignments: list[str], fixed: dict[
         key, text = assignment.split("=", 1)
         key = key.strip()
         if not _match(key, allowed):
-            raise _unknown(key, config)
+            raise unknown_key(key, config)
         if fixed and key in fixed:
             raise ValueError(f"--set {key} cannot be changed on this bench: {fixed[key]}")
         group, *path = key.split(".")
         config[group] = _replace(config[group], path, text, key)
     return config
+
+
+@functools.cache
+def _field_docs(cls) -> dict[str, str]:
+    """The attribute docstrings of a dataclass (and its bases): the string after each field."""
+    import ast
+    import inspect
+    import textwrap
+    docs: dict[str, str] = {}
+    for klass in reversed(cls.__mro__):
+        if not dataclasses.is_dataclass(klass):
+            continue
+        try:
+            tree = ast.parse(textwrap.dedent(inspect.getsource(klass)))
+        except (OSError, TypeError, SyntaxError):
+            continue  # a class made at run time (an actuator file's model) has no source
+        body = tree.body[0].body if tree.body and isinstance(tree.body[0], ast.ClassDef) else []
+        for node, after in zip(body, body[1:], strict=False):
+            if (isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name)
+                    and isinstance(after, ast.Expr) and isinstance(after.value, ast.Constant)
+                    and isinstance(after.value.value, str)):
+                docs[node.target.id] = " ".join(after.value.value.split())
+    return docs
+
+
+def key_table(config: dict[str, Any]) -> list[tuple[str, Any, str]]:
+    """Every settable key with its current value and its docstring, cut at 100 characters
+    (units are written there, in parentheses)."""
+    rows = []
+
+    def walk(prefix: str, obj) -> None:
+        docs = _field_docs(type(obj))
+        for name in _fields(obj):
+            value = getattr(obj, name)
+            key = f"{prefix}.{name}"
+            if dataclasses.is_dataclass(value):
+                walk(key, value)
+                continue
+            doc = docs.get(name, "").replace(":data:", "").replace("``", "").replace("`", "")
+            first = doc if len(doc) <= 100 else doc[:99].rstrip() + "…"
+            if isinstance(value, dict):
+                rows.append((f"{key}.{OPTION}", value or "{}", first or "a pass-through option"))
+            else:
+                rows.append((key, value, first))
+
+    for group, obj in config.items():
+        walk(group, obj)
+    return rows
 
 
 def describe(config: dict[str, Any]) -> dict[str, Any]:
@@ -165,7 +220,7 @@ def describe(config: dict[str, Any]) -> dict[str, Any]:
 def get_value(config: dict[str, Any], key: str) -> Any:
     """The current value of a key."""
     if key not in allowed_keys(config):
-        raise _unknown(key, config)
+        raise unknown_key(key, config)
     group, *path = key.split(".")
     value = config[group]
     for name in path:

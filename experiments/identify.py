@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import datetime as dt
 import json
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +45,12 @@ def identify_command(args) -> int:
         "%Y%m%dT%H%M%SZ") / "model.json"
     if out.exists() and out.is_dir():
         raise ValueError(f"--out {out} is a folder; name the model document's file")
+    try:  # before the fit: a path that cannot be written fails now, not after minutes of work
+        out.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out.parent):
+            pass
+    except OSError as exc:
+        raise ValueError(f"--out {str(out)!r} cannot be written ({exc.strerror or type(exc).__name__})") from None
     identified = identify(args.family, u, y, period, options, args.dynamics,
                           None if fast is None else fast[:2], args.max_delay)
     val = None

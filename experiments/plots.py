@@ -63,7 +63,7 @@ def scenario_figure(runs: list[RunResult], path: str | Path | None = None):
 
 
 def rmse_figure(runs: list[RunResult], path: str | Path | None = None):
-    """Grouped bars: RMSE per scenario and controller (log scale)."""
+    """Grouped bars: RMSE per scenario and controller (log scale), each bar labelled with its value."""
     scenarios = list(dict.fromkeys(r.scenario for r in runs))
     controllers = list(dict.fromkeys(r.controller for r in runs))
     width = 0.8 / len(controllers)
@@ -71,10 +71,13 @@ def rmse_figure(runs: list[RunResult], path: str | Path | None = None):
     for j, c in enumerate(controllers):
         values = [next((r.metrics["rmse"] for r in runs if r.scenario == s and r.controller == c), np.nan)
                   for s in scenarios]
-        ax.bar(np.arange(len(scenarios)) + j * width, values, width, label=c)
+        bars = ax.bar(np.arange(len(scenarios)) + j * width, values, width, label=c)
+        ax.bar_label(bars, labels=[f"{v:.3g}" if np.isfinite(v) else "" for v in values], fontsize=7,
+                     rotation=90 if len(controllers) > 3 else 0, padding=2)
     ax.set_xticks(np.arange(len(scenarios)) + 0.4 - width / 2, scenarios)
     title = runs[0].bench or runs[0].labels.output_name
     ax.set(ylabel=f"RMSE [{runs[0].units}]", yscale="log", title=f"{title}: tracking RMSE")
+    ax.set_ylim(top=ax.get_ylim()[1] * 3)  # room for the labels
     ax.grid(alpha=0.3, axis="y")
     ax.legend()
     return _finish(fig, path)

@@ -55,8 +55,9 @@ def _header(path: Path, what: str) -> list[str]:
 def read_columns(path: str | Path, columns: tuple[str, ...], what: str, minimum_rows: int = 2) -> np.ndarray:
     """The named columns of a CSV file with a header, as a float array (rows: samples).
 
-    ``ValueError`` naming the file (as ``what``) for a missing file or column, a
-    non-numeric or missing value, NaN or infinite values, or fewer than ``minimum_rows``.
+    ``ValueError`` naming the file (as ``what``) for a missing or unreadable file or
+    column, a row whose field count differs from the header's, a non-numeric or missing
+    value (with its line), NaN or infinite values, or fewer than ``minimum_rows``.
     """
     path = Path(path)
     header = _header(path, what)
@@ -65,18 +66,39 @@ def read_columns(path: str | Path, columns: tuple[str, ...], what: str, minimum_
         raise ValueError(f"{what} {str(path)!r} lacks column {missing[0]!r}; needs {', '.join(columns)}, "
                          f"has {header}")
     index = [header.index(c) for c in columns]
-    with path.open(newline="") as fh:
-        rows = list(csv.reader(fh))[1:]
     try:
-        data = np.array([[float(r[i]) for i in index] for r in rows if any(c.strip() for c in r)])
-    except (ValueError, IndexError):
-        raise ValueError(f"{what} {str(path)!r} has a non-numeric or missing value") from None
+        with path.open(newline="") as fh:
+            rows = list(csv.reader(fh))[1:]
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise ValueError(f"{what} {str(path)!r} cannot be read as CSV text ({type(exc).__name__})") from None
+    values = []
+    for line, row in enumerate(rows, start=2):
+        if not any(c.strip() for c in row):
+            continue
+        if len(row) != len(header):
+            raise ValueError(f"{what} {str(path)!r}, line {line}: {len(row)} fields, the header has "
+                             f"{len(header)}")
+        try:
+            values.append([float(row[i]) for i in index])
+        except ValueError:
+            bad = next(row[i] for i in index if not _is_number(row[i])).strip()
+            problem = f"{bad!r} is not a number" if bad else "a value is missing"
+            raise ValueError(f"{what} {str(path)!r}, line {line}: {problem}") from None
+    data = np.array(values, float).reshape(len(values), len(columns))
     if len(data) < minimum_rows:
         raise ValueError(f"{what} {str(path)!r} needs at least {minimum_rows} rows, has {len(data)}")
     if not np.all(np.isfinite(data)):
         bad = int(np.flatnonzero(~np.all(np.isfinite(data), axis=1))[0]) + 2
         raise ValueError(f"{what} {str(path)!r} has NaN or infinite values (line {bad})")
     return data.reshape(len(data), len(columns))
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def load_record(path: str | Path, what: str = "data file") -> tuple[np.ndarray, np.ndarray, float]:

@@ -98,30 +98,64 @@ def write_run_csv(run: RunResult, folder: str | Path) -> Path:
 
 
 def _fmt(value, digits=3) -> str:
+    """``digits`` significant digits, trailing zeros kept (a dash for a missing value)."""
     if value is None or (isinstance(value, float) and not np.isfinite(value)):
         return "–"
-    if isinstance(value, int):
+    if isinstance(value, (int, np.integer)):
         return str(value)
-    return f"{value:.{digits}g}" if abs(value) < 1e-2 and value != 0 else f"{value:.{digits}f}"
+    if value == 0:
+        return "0"
+    if abs(value) >= 10 ** digits:
+        return f"{value:.0f}"
+    if abs(value) >= 1e-4:
+        return f"{value:#.{digits}g}".rstrip(".")
+    return f"{value:.{digits - 1}e}"
+
+
+def _best_per_scenario(runs: list[RunResult]) -> set[int]:
+    best: dict[str, int] = {}
+    for i, r in enumerate(runs):
+        rmse = r.metrics["rmse"]
+        j = best.get(r.scenario)
+        if np.isfinite(rmse) and (j is None or rmse < runs[j].metrics["rmse"]):
+            best[r.scenario] = i
+    counts = {s: sum(r.scenario == s for r in runs) for s in best}
+    return {i for s, i in best.items() if counts[s] > 1}
 
 
 def comparison_table(runs: list[RunResult]) -> str:
-    """Markdown table (readable in a terminal) of every run, like a paper's table."""
+    """Markdown table (readable in a terminal) of every run, like a paper's table.
+
+    Four significant digits for the errors, three for the rest; the least RMSE of each
+    scenario in bold; the paper's RMSE beside ours where the paper has one; a ``guard
+    clips`` column when the plant guard changed any input.
+    """
     stepped = any("overshoot_pct" in r.metrics for r in runs)
+    papers = any(r.paper and "rmse" in r.paper for r in runs)
+    guarded = any(r.guard and r.guard["clips"] for r in runs)
     units = runs[0].units if runs else ""
-    head = ["scenario", "controller", f"RMSE [{units}]", f"MAE [{units}]", f"max abs error [{units}]"]
+    head = ["scenario", "controller", f"RMSE [{units}]"] + (["paper RMSE"] if papers else []) + [
+        f"MAE [{units}]", f"max abs error [{units}]"]
     if stepped:
         head += ["overshoot [%]", "settling 2% [s]", f"ss error [{units}]"]
-    head += ["ms/step median", "ms/step p95", "fails/fallbacks"]
+    head += ["ms/step median", "ms/step p95", "fails/fallbacks"] + (["guard clips"] if guarded else [])
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
-    for r in runs:
+    best = _best_per_scenario(runs)
+    for i, r in enumerate(runs):
         m = r.metrics
-        cells = [r.scenario, r.controller, _fmt(m["rmse"]), _fmt(m["mae"]), _fmt(m["max_abs_error"])]
+        rmse = _fmt(m["rmse"], 4)
+        cells = [r.scenario, r.controller, f"**{rmse}**" if i in best else rmse]
+        if papers:
+            paper = (r.paper or {}).get("rmse")
+            cells.append("–" if paper is None else f"{paper:.4g}")  # as printed in the paper
+        cells += [_fmt(m["mae"], 4), _fmt(m["max_abs_error"], 4)]
         if stepped:
-            cells += [_fmt(m.get("overshoot_pct"), 1), _fmt(m.get("settling_time_s"), 2),
-                      _fmt(m.get("steady_state_error"))]
+            cells += [_fmt(m.get("overshoot_pct")), _fmt(m.get("settling_time_s")),
+                      _fmt(m.get("steady_state_error"), 4)]
         timing = r.timing
-        cells += [_fmt(timing["step_ms_median"], 2), _fmt(timing["step_ms_p95"], 2),
+        cells += [_fmt(timing["step_ms_median"]), _fmt(timing["step_ms_p95"]),
                   f"{r.solver['failures']}/{r.solver['fallbacks']}" if r.solver else "–"]
+        if guarded:
+            cells.append(str(r.guard["clips"]) if r.guard else "–")
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)

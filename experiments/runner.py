@@ -92,6 +92,9 @@ class RunResult:
     paper: dict[str, float] | None = None
     """The paper's figures for this scenario and controller, where there are some."""
     bench: str = ""
+    guard: dict[str, Any] | None = None
+    """What the plant guard did (:class:`InputGuard`): its bounds and ``clips``, the
+    samples whose input it changed (``non_finite`` of them were not a number)."""
 
     @property
     def units(self) -> str:
@@ -114,6 +117,10 @@ class RunResult:
         }
         if self.solver is not None:
             entry["solver"] = self.solver
+            if self.guard is not None:
+                entry["solver"] = {**self.solver, "guard_clips": self.guard["clips"]}
+        if self.guard is not None:
+            entry["guard"] = self.guard
         if self.paper:
             entry["paper"] = dict(self.paper)
         entry["parameters"] = self.parameters
@@ -127,6 +134,45 @@ class RunResult:
         """
         from hystmpc.experiments.plots import scenario_figure
         return scenario_figure([self, *others], path)
+
+
+@dataclass(frozen=True)
+class InputGuard:
+    """The actuator's physical input limits, enforced between any controller and the plant.
+
+    Independent of every controller and model setting: a controller that asks for an input
+    outside ``[lower, upper]``, more than ``rate`` away from the last applied input, or not a
+    number, gets it clipped (a non-finite input holds the last applied one, at the first
+    sample ``rest`` clipped into the bounds) and the sample is counted.
+    """
+
+    lower: float = -np.inf
+    upper: float = np.inf
+    rate: float = np.inf
+    """Largest change per sample (``inf``: none)."""
+    rest: float = 0.0
+    """The input held when the very first one is not a number."""
+
+    def __post_init__(self):
+        if not self.lower < self.upper or not self.rate > 0:
+            raise ValueError(f"the input guard needs lower < upper and rate > 0, got {self.lower}, {self.upper}, "
+                             f"{self.rate}")
+
+    def apply(self, u: float, last: float | None) -> tuple[float, bool, bool]:
+        """``(applied input, clipped, non_finite)`` for the requested ``u`` after ``last``."""
+        if not np.isfinite(u):
+            held = float(np.clip(self.rest, self.lower, self.upper)) if last is None else last
+            return held, True, True
+        applied = float(u)
+        if last is not None and np.isfinite(self.rate):
+            applied = min(max(applied, last - self.rate), last + self.rate)
+        applied = min(max(applied, self.lower), self.upper)
+        # a controller that respects the same rate lands within rounding of it: applied, not counted
+        return applied, abs(applied - u) > 1e-12 * max(1.0, abs(u)), False
+
+    def describe(self) -> dict[str, float]:
+        """The bounds, for a run's result."""
+        return {"lower": self.lower, "upper": self.upper, "rate": self.rate}
 
 
 def reference_samples(reference, dt: float, duration: float | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -158,7 +204,7 @@ def _checked(t: np.ndarray, ref: np.ndarray) -> np.ndarray:
 
 def simulate(plant: Plant, controller: Controller, reference, duration: float | None = None, seed: int = 0, *,
              name: str | None = None, scenario: str | None = None, labels: Labels = Labels(),
-             progress: Callable[[int], Any] | None = None) -> RunResult:
+             progress: Callable[[int], Any] | None = None, guard: InputGuard | None = None) -> RunResult:
     """Run ``controller`` against ``plant`` along ``reference``.
 
     Parameters
@@ -180,6 +226,10 @@ def simulate(plant: Plant, controller: Controller, reference, duration: float | 
         Signal names and units for the result's table and figures.
     progress : callable, optional
         Called with 1 after each sample.
+    guard : InputGuard, optional
+        The actuator's physical input limits; every input passes through it before
+        ``plant.step`` (default: only finiteness is enforced, a non-finite input holds the
+        last one). The result's ``input`` is the applied input.
     """
     dt = plant.sample_period
     t, ref = reference_samples(reference, dt, duration)
@@ -192,6 +242,9 @@ def simulate(plant: Plant, controller: Controller, reference, duration: float | 
     n = len(t)
     out, u_hist, pred, step_times = (np.empty(n) for _ in range(4))
     truth: dict[str, list[float]] = {}
+    guard = guard or InputGuard()
+    clips = non_finite = 0
+    last = None
     meas = plant.reset(seed)
     for k in range(n):
         out[k] = meas.y
@@ -201,10 +254,10 @@ def simulate(plant: Plant, controller: Controller, reference, duration: float | 
         u = controller.step(meas, ref_padded[k: k + horizon + 1])
         step_times[k] = time.perf_counter() - start
         pred[k] = getattr(controller, "predicted_output", float("nan"))
-        if not np.isfinite(u):
-            raise RuntimeError(f"controller {name or type(controller).__name__} produced a non-finite input {u} "
-                               f"at t={t[k]:.3f}")
-        u_hist[k] = u
+        u, clipped, bad = guard.apply(float(u), last)
+        clips += clipped
+        non_finite += bad
+        u_hist[k] = last = u
         if k < n - 1:
             meas = plant.step(u)
         if progress is not None:
@@ -219,4 +272,4 @@ def simulate(plant: Plant, controller: Controller, reference, duration: float | 
                      sample_period=dt, t=t, reference=ref, output=out, input=u_hist, predicted=pred,
                      truth={k: np.asarray(v) for k, v in truth.items()}, step_times=step_times,
                      metrics=metrics, solver=controller.stats() if hasattr(controller, "stats") else None,
-                     labels=labels)
+                     labels=labels, guard={**guard.describe(), "clips": clips, "non_finite": non_finite})

@@ -11,7 +11,9 @@ sample), how often ``nmpc`` beats each baseline and the best of them.
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import io
 import json
 import math
 import multiprocessing
@@ -32,6 +34,8 @@ SPEC_KEYS = ("bench", "scenarios", "controllers", "seeds", "perturb", "duration"
 METRICS = ("rmse", "mae", "max_abs_error")
 CHALLENGER = "nmpc"
 """The controller whose wins against the others the summary counts."""
+WARNING_LINES_KEPT = 20
+"""Solver warning lines a record keeps (the count is always kept)."""
 RECORD_SCHEMA = "hystmpc.sweep-run/1"
 SUMMARY_SCHEMA = "hystmpc.sweep-summary/1"
 
@@ -104,7 +108,8 @@ def _string_list(path, raw: dict, key: str, allowed: Iterable[str], default: lis
     return tuple(value)
 
 
-def load_spec(path: str | Path, extra_overrides: Iterable[str] = (), duration: float | None = None) -> SweepSpec:
+def load_spec(path: str | Path, extra_overrides: Iterable[str] = (), duration: float | None = None,
+              force: bool = False) -> SweepSpec:
     """Read and check a sweep spec.
 
     Parameters
@@ -115,6 +120,9 @@ def load_spec(path: str | Path, extra_overrides: Iterable[str] = (), duration: f
         ``KEY=VALUE`` assignments from the command line, applied after the spec's ``set``.
     duration : float, optional
         Run length (s) from the command line; replaces the spec's ``duration``.
+    force : bool
+        Lift the work ceilings of :mod:`hystmpc.experiments.limits` (horizon, samples per
+        run, runs and samples per sweep).
 
     Raises
     ------
@@ -122,7 +130,7 @@ def load_spec(path: str | Path, extra_overrides: Iterable[str] = (), duration: f
         Naming the file, the bad entry and what is allowed.
     """
     from hystmpc.experiments.benches import get_bench, is_actuator_file
-    from hystmpc.experiments.config import allowed_keys, get_value
+    from hystmpc.experiments.config import allowed_keys, get_value, unknown_key
 
     path = Path(path)
     try:
@@ -156,8 +164,8 @@ def load_spec(path: str | Path, extra_overrides: Iterable[str] = (), duration: f
     if duration is None:
         duration = raw.get("duration")
     if duration is not None and (isinstance(duration, bool) or not isinstance(duration, (int, float))
-                                 or not duration > 0):
-        _fail(path, f"duration must be a number of seconds > 0, got {duration!r}")
+                                 or not math.isfinite(duration) or not duration > 0):
+        _fail(path, f"duration must be a finite number of seconds > 0, got {duration!r}")
     overrides = raw.get("set", [])
     if not isinstance(overrides, list) or not all(isinstance(o, str) for o in overrides):
         _fail(path, "set must be a list of 'KEY=VALUE' strings")
@@ -167,9 +175,10 @@ def load_spec(path: str | Path, extra_overrides: Iterable[str] = (), duration: f
     except ValueError as exc:
         _fail(path, str(exc))
 
-    perturb = dict(raw.get("perturb", {}))
     if not isinstance(raw.get("perturb", {}), dict):
-        _fail(path, "perturb must be a table of KEY = relative amplitude, plus samples = N")
+        _fail(path, f"perturb must be a table of KEY = relative amplitude, plus samples = N; got "
+                    f"{raw['perturb']!r}")
+    perturb = dict(raw.get("perturb", {}))
     samples = perturb.pop("samples", 10 if perturb else 1)
     if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
         _fail(path, f"perturb.samples must be an integer >= 1, got {samples!r}")
@@ -177,7 +186,7 @@ def load_spec(path: str | Path, extra_overrides: Iterable[str] = (), duration: f
     fixed = {c.split("=", 1)[0] for name in scenarios for c in bench.scenarios[name].conditions}
     for key, amplitude in perturb.items():
         if key not in allowed:
-            _fail(path, f"unknown perturb key {key!r}; allowed: {', '.join(allowed)}")
+            _fail(path, str(unknown_key(key, config)).replace("--set key", "perturb key"))
         if key in fixed:
             _fail(path, f"perturb key {key!r} is fixed by the scenarios; perturb another parameter")
         value = get_value(config, key)
@@ -186,10 +195,21 @@ def load_spec(path: str | Path, extra_overrides: Iterable[str] = (), duration: f
             _fail(path, f"perturb key {key!r} is not a real-valued parameter (it is {value!r})")
         if isinstance(amplitude, bool) or not isinstance(amplitude, (int, float)) or not 0 < amplitude < 1:
             _fail(path, f"perturb amplitude of {key!r} must be a number in (0, 1), got {amplitude!r}")
-    return SweepSpec(bench=raw["bench"], scenarios=scenarios, controllers=controllers, seeds=tuple(seeds),
+    spec = SweepSpec(bench=raw["bench"], scenarios=scenarios, controllers=controllers, seeds=tuple(seeds),
                      perturb={k: float(v) for k, v in sorted(perturb.items())}, samples=samples,
                      duration=None if duration is None else float(duration), overrides=overrides,
                      perturb_seed=perturb_seed)
+    from hystmpc.experiments.limits import check_horizons, check_run_samples, check_sweep, run_samples
+    try:
+        per_scenario = {name: run_samples(spec.duration or bench.scenarios[name].duration, bench.sample_period,
+                                          "duration") for name in scenarios}
+        for name, n in per_scenario.items():
+            check_run_samples(n, f"a run of {name}", force)
+        check_horizons(config, force)
+        check_sweep(spec.n_runs, sum(per_scenario.values()) * spec.n_runs // len(scenarios), force)
+    except ValueError as exc:
+        _fail(path, str(exc))
+    return spec
 
 
 def perturbation_factors(spec: SweepSpec, sample: int) -> dict[str, float]:
@@ -242,17 +262,22 @@ def execute(task: RunTask) -> dict[str, Any]:
         "perturbation": task.factors, "overrides": list(task.overrides), "version": version(),
     }
     start = time.perf_counter()
+    warnings_text = io.StringIO()  # solver and CasADi warnings: to the sweep's solver.log, not the terminal
     try:
         bench = get_bench(task.bench)
         config = bench.configure(task.overrides)
-        run = bench.run(task.scenario, task.controller, config, seed=task.seed, duration=task.duration)
-        record.update(status="ok", metrics=run.metrics, timing=run.timing)
+        with contextlib.redirect_stderr(warnings_text):
+            run = bench.run(task.scenario, task.controller, config, seed=task.seed, duration=task.duration)
+        record.update(status="ok", metrics=run.metrics, timing=run.timing, guard=run.guard)
         if run.solver is not None:
             record["solver"] = run.solver
     except Exception as exc:  # noqa: BLE001 - a failed run is data, recorded with its cause
         record.update(status="error", error=f"{type(exc).__name__}: {exc}",
                       traceback=traceback.format_exc(limit=-4))
     record["elapsed_s"] = time.perf_counter() - start
+    lines = warnings_text.getvalue().splitlines()
+    if lines:
+        record["solver_warnings"] = {"lines": len(lines), "first": lines[:WARNING_LINES_KEPT]}
     return json_safe(record)
 
 
@@ -270,8 +295,39 @@ def write_record(record: dict[str, Any], folder: Path) -> Path:
     return final
 
 
-def read_records(folder: Path) -> dict[str, dict[str, Any]]:
-    """Finished records by run id (leftover temporary files of a killed sweep are removed)."""
+RECORD_FIELDS = {"run_id": str, "scenario": str, "controller": str, "seed": int, "sample": int, "status": str}
+
+
+def _record_problem(record: Any, path: Path, expected: set[str] | None) -> str | None:
+    """Why a stored record cannot be used (None: it can)."""
+    if not isinstance(record, dict):
+        return "not a JSON object"
+    for key, kind in RECORD_FIELDS.items():
+        if not isinstance(record.get(key), kind):
+            return f"field {key!r} missing or not {kind.__name__}"
+    if record["run_id"] != path.stem:
+        return f"run_id {record['run_id']!r} does not match the file name"
+    if expected is not None and record["run_id"] not in expected:
+        return "not a run of this sweep's spec"
+    if record["status"] not in ("ok", "error"):
+        return f"status {record['status']!r} is neither ok nor error"
+    if record["status"] == "ok":
+        metrics = record.get("metrics")
+        if not isinstance(metrics, dict) or not all(
+                metrics.get(m) is None or isinstance(metrics.get(m), (int, float)) for m in METRICS):
+            return "metrics missing or not numbers"
+    return None
+
+
+def read_records(folder: Path, expected: set[str] | None = None,
+                 set_aside: Path | None = None) -> dict[str, dict[str, Any]]:
+    """Usable records by run id (leftover temporary files of a killed sweep are removed).
+
+    A record that does not parse, lacks a field, or (with ``expected``, the spec's run ids)
+    belongs to no run of the spec is not used; with ``set_aside`` it is moved there, with
+    a warning, so that its run is redone and nothing is deleted.
+    """
+    import logging
     records = {}
     if not folder.is_dir():
         return records
@@ -280,10 +336,17 @@ def read_records(folder: Path) -> dict[str, dict[str, Any]]:
     for path in sorted(folder.glob("*.json")):
         try:
             record = json.loads(path.read_text())
-        except (OSError, json.JSONDecodeError):
-            continue  # cannot happen with atomic writes; if it does, the run is simply redone
-        if isinstance(record, dict) and record.get("run_id") == path.stem:
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            problem = f"does not parse ({type(exc).__name__})"
+        else:
+            problem = _record_problem(record, path, expected)
+        if problem is None:
             records[path.stem] = record
+        elif set_aside is not None:
+            set_aside.mkdir(parents=True, exist_ok=True)
+            os.replace(path, set_aside / path.name)
+            logging.getLogger("hystmpc").warning(f"record {path.name} {problem}: moved to "
+                                                 f"{set_aside / path.name}; its run is redone")
     return records
 
 
@@ -350,6 +413,7 @@ def summarize(spec: SweepSpec, records: dict[str, dict[str, Any]], metric: str =
                      "failed": len(rs) - len(ok)}
             for m in METRICS:
                 group[m] = _quartiles([r["metrics"][m] for r in ok if r["metrics"].get(m) is not None])
+            group["guard_clips"] = int(sum((r.get("guard") or {}).get("clips", 0) for r in ok))
             if any("solver" in r for r in ok):
                 group["solver_failures"] = int(sum(r.get("solver", {}).get("failures", 0) for r in ok))
                 group["fallbacks"] = int(sum(r.get("solver", {}).get("fallbacks", 0) for r in ok))
@@ -527,7 +591,7 @@ class SweepOutcome:
 
 def run_sweep(spec: SweepSpec, out: Path, workers: int | None = None, executor: str = "local",
               scheduler: str | None = None, resume: bool = False, plots: bool = True, quiet: bool = False,
-              spec_text: str | None = None) -> SweepOutcome:
+              spec_text: str | None = None, retry_failed: bool = False) -> SweepOutcome:
     """Run (or finish) a sweep into ``out``; see the module docstring.
 
     Parameters
@@ -545,6 +609,9 @@ def run_sweep(spec: SweepSpec, out: Path, workers: int | None = None, executor: 
         Address of a running Dask scheduler (with ``executor="dask"``); a ``LocalCluster`` otherwise.
     resume : bool
         Skip the runs ``out`` already holds; ``out`` must hold a sweep of the same spec.
+        Records that cannot be used are moved to ``out/set-aside/`` and their runs redone.
+    retry_failed : bool
+        With ``resume``, also redo the runs recorded as errors.
     """
     from hystmpc.experiments.benches import get_bench
     from hystmpc.experiments.report import version
@@ -557,8 +624,17 @@ def run_sweep(spec: SweepSpec, out: Path, workers: int | None = None, executor: 
     out = Path(out)
     records_dir = out / "records"
     stored = out / "sweep.json"
+    if retry_failed and not resume:
+        raise SpecError("--retry-failed redoes the failed runs of a sweep: use it with --resume")
+    if out.exists() and not out.is_dir():
+        raise SpecError(f"--out {str(out)!r} is a file; give a folder")
     if stored.exists():
-        previous = json.loads(stored.read_text()).get("spec")
+        try:
+            previous = json.loads(stored.read_text())
+            previous = previous.get("spec") if isinstance(previous, dict) else None
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise SpecError(f"{stored} cannot be read ({type(exc).__name__}); it is not the record of a sweep "
+                            "this version can finish: choose another --out") from None
         if not resume:
             raise SpecError(f"{out} already holds a sweep; add --resume to finish it, or choose another --out")
         if previous != spec.as_dict():
@@ -567,6 +643,8 @@ def run_sweep(spec: SweepSpec, out: Path, workers: int | None = None, executor: 
                             f"(changed: {', '.join(changed)})")
     elif resume:
         raise SpecError(f"--resume: nothing to resume in {out} (no sweep.json)")
+    elif out.is_dir() and any(out.iterdir()):
+        raise SpecError(f"--out {str(out)!r} is not empty and holds no sweep; choose another folder")
     out.mkdir(parents=True, exist_ok=True)
     if not stored.exists():
         stored.write_text(json.dumps({"schema": "hystmpc.sweep/1", "version": version(), "spec": spec.as_dict(),
@@ -575,7 +653,10 @@ def run_sweep(spec: SweepSpec, out: Path, workers: int | None = None, executor: 
             (out / "spec.toml").write_text(spec_text)
 
     tasks = make_tasks(spec)
-    done = read_records(records_dir)
+    expected = {t.run_id for t in tasks}
+    done = read_records(records_dir, expected, out / "set-aside")
+    if retry_failed:
+        done = {k: r for k, r in done.items() if r["status"] == "ok"}
     pending = [t for t in tasks if t.run_id not in done]
     # the expensive controller first, so the pool is not left with one long run at the end
     pending.sort(key=lambda t: t.controller != CHALLENGER)
@@ -589,6 +670,11 @@ def run_sweep(spec: SweepSpec, out: Path, workers: int | None = None, executor: 
         def on_done(record):
             nonlocal failed, finished
             write_record(record, records_dir)
+            if record.get("solver_warnings"):
+                with open(out / "solver.log", "a") as log:
+                    w = record["solver_warnings"]
+                    log.write(f"== {record['run_id']}: {w['lines']} lines, the first {len(w['first'])}:\n"
+                              + "\n".join(w["first"]) + "\n")
             failed += record["status"] != "ok"
             finished += 1
             bar.update(1)
@@ -606,7 +692,7 @@ def run_sweep(spec: SweepSpec, out: Path, workers: int | None = None, executor: 
                 _run_dask(pending, workers, scheduler, on_done)
     wall = time.perf_counter() - start
 
-    records = read_records(records_dir)
+    records = read_records(records_dir, expected, out / "set-aside")
     summary = summarize(spec, records)
     summary["run_info"] = {"version": version(), "executor": executor, "workers": workers,
                            "scheduler": scheduler, "ran": len(pending), "skipped": len(tasks) - len(pending),

@@ -47,7 +47,8 @@ class NmpcController:
     """Offset-free NMPC loop.
 
     Each sample: the observer's time and measurement update (restarted from the sensors if
-    the estimate is not finite); an initial guess (inverse model at start-up, after a
+    the estimate is not finite, which counts as a failure: the fallback input is applied);
+    an initial guess (inverse model at start-up, after a
     reference jump enters the horizon and after a failure; the shifted previous plan
     otherwise); the solve; on failure the previous plan's next input (or, without one, the
     inverse model's) is applied, and the failure is counted. The input sent is always
@@ -135,14 +136,20 @@ class NmpcController:
 
     def step(self, measurement, ref_window) -> float:
         """One sample: a measurement and the references ``r_k..r_{k+N}`` in, the input out."""
+        # a diverging estimate or cost is tested for and counted below, not warned about
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            return self._step(measurement, ref_window)
+
+    def _step(self, measurement, ref_window) -> float:
         N = self.horizon
         ref_window = np.asarray(ref_window, float).ravel()
         if len(ref_window) != N + 1:
             raise ValueError(f"ref_window needs {N + 1} samples, got {len(ref_window)}")
         if not self.settings.preview:
             ref_window = np.full(N + 1, ref_window[0])
-        if self.observer.update(self.sensors(measurement), self._u_last if self._started else None):
-            self.estimator_resets += 1  # never plan from a NaN estimate: it started again
+        estimate_lost = self.observer.update(self.sensors(measurement), self._u_last if self._started else None)
+        if estimate_lost:
+            self.estimator_resets += 1  # never plan from a NaN estimate: it started again from the sensors
             self._plan = None
         self.predicted_output = self.observer.predicted_output
         est = self.observer.estimate(N)
@@ -159,9 +166,16 @@ class NmpcController:
         jump = (self._last_ref_end is not None
                 and abs(refs[-1] - self._last_ref_end) > self.jump_threshold)
         self._last_ref_end = refs[-1]
-        u_guess, x_guess = self._initial_guess(u_inv, jump, est)
-        u_ff = u_inv() if self.settings.r_input > 0 else np.zeros(N)  # zero weight: value unused
-        result = self.problem.solve(self.observer.condition(est), self._u_last, refs, u_guess, x_guess, u_ff=u_ff)
+        if estimate_lost:  # a failure: the restarted estimate has not seen one update yet
+            result = Solution(u_plan=np.full((N, 1), np.nan), x_plan=None, success=False,
+                              status="Non_Finite_Estimate", iterations=0, solve_time=0.0)
+        else:
+            u_guess, x_guess = self._initial_guess(u_inv, jump, est)
+            u_ff = u_inv() if self.settings.r_input > 0 else np.zeros(N)  # zero weight: value unused
+            result = self.problem.solve(self.observer.condition(est), self._u_last, refs, u_guess, x_guess,
+                                        u_ff=u_ff)
+            if result.success and not np.all(np.isfinite(result.u_plan)):
+                result.success, result.status = False, f"{result.status}_Non_Finite"
         self.iterations.append(result.iterations)
         self.solve_times.append(result.solve_time)
         self.statuses[result.status] = self.statuses.get(result.status, 0) + 1

@@ -9,6 +9,7 @@ from hystmpc.experiments.cli import main
 from hystmpc.experiments.realtime import codegen
 
 
+@pytest.mark.slow  # the whole-scenario check of every bench below covers it; kept for a quick local look
 def test_codegen_round_trip_on_compliant(tmp_path):
     """The compiled RTI step and the in-process one give the same inputs in closed loop, and
     the standalone C program reproduces the in-process step."""

@@ -44,7 +44,8 @@ def test_amplifier_slew_limit_and_hysteresis_width():
     assert m.truth["force"] - f_rise > 0.3  # descending branch above ascending: about 2·p1·dF/di
 
 
-@pytest.mark.parametrize("core, force_max", [(ReluctanceParams(), 400.0), (C_CORE, 240.0)])
+@pytest.mark.parametrize("core, force_max", [pytest.param(ReluctanceParams(), 400.0, marks=pytest.mark.slow),
+                                             (C_CORE, 240.0)])
 def test_identification_from_noisy_measurements_recovers_the_plant(core, force_max):
     """Section 3.5 on simulated noisy major loops (σ = 0.05 N) at five air gaps."""
     loops = {g: major_loop_measurement(core, g, force_max, seed=k) for k, g in enumerate(GAPS)}

@@ -1,0 +1,145 @@
+"""The command-line contract, case by case: bad input exits 2 with one line naming the option
+or file, the bad value and what is allowed; nothing is left behind; output paths are checked
+before any work starts.
+
+Each case: the arguments (``{tmp}`` is a fresh folder holding the files below), the exit
+code and a phrase the message must contain.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from hystmpc.experiments.cli import main
+
+SHORT = ["--duration", "0.2", "--no-plots"]
+RUN = ["run", "pam", "square-20", "--controller", "pi"]
+FILES = {
+    "ragged.csv": "t,angle\n0,0\n0.1,10,3\n",
+    "short.csv": "t,angle\n0,0\n1,10\n2,10\n",
+    "binary.csv": b"\x00\x81\xff\xfe t,angle",
+    "spec_perturb.toml": 'bench = "pam"\nperturb = 3\n',
+    "spec_huge.toml": 'bench = "pam"\n[perturb]\n"plant.payload_kg" = 0.2\nsamples = 1000000000\n',
+    "spec_long.toml": 'bench = "pam"\nduration = 1e9\n',
+    "spec_inf.toml": 'bench = "pam"\nduration = inf\n',
+    "spec_ok.toml": 'bench = "pam"\nscenarios = ["square-20"]\ncontrollers = ["pi"]\nduration = 0.2\n',
+    "a_file": "not a folder\n",
+    "full/keep.txt": "a result the user keeps\n",
+    "corrupt/sweep.json": "{not json",
+}
+"""Files under {tmp}, made fresh for each case."""
+
+CASES = [
+    # durations and seeds
+    (RUN + ["--duration", "0.001", "--no-plots"], 2, "--duration 0.001 s is shorter than 2 samples at 0.02 s"),
+    (RUN + ["--duration", "inf", "--no-plots"], 2, "--duration must be a finite number of seconds > 0, got inf"),
+    (RUN + ["--duration", "nan", "--no-plots"], 2, "--duration must be a finite number of seconds > 0, got nan"),
+    (RUN + ["--duration", "-1", "--no-plots"], 2, "--duration must be a finite number of seconds > 0, got -1"),
+    (RUN + ["--duration", "1e9", "--no-plots"], 2, "above the limit of 1,000,000 per run; pass --force"),
+    (RUN + ["--seed", "-1"] + SHORT, 2, "--seed must be an integer >= 0, got -1"),
+    (RUN + ["--seed", "x"] + SHORT, 2, "argument --seed: invalid int value: 'x'"),
+    # work limits
+    (["run", "pam", "square-20", "--controller", "nmpc", "--set", "nmpc.horizon=10000"] + SHORT, 2,
+     "nmpc.horizon=10000 is above the limit of 200 samples; pass --force"),
+    (["codegen", "pam", "--set", "nmpc.horizon=500", "--out", "{tmp}/cg"], 2, "nmpc.horizon=500 is above the limit"),
+    (["speed", "pam", "--duration", "0.001", "--out", "{tmp}/sp"], 2, "shorter than 2 samples"),
+    # reference files
+    (["run", "pam", "--controller", "pi", "--reference", "{tmp}/ragged.csv", "--no-plots"], 2,
+     "reference file '{tmp}/ragged.csv', line 3: 3 fields, the header has 2"),
+    (["run", "pam", "--controller", "pi", "--reference", "{tmp}/binary.csv", "--no-plots"], 2,
+     "reference file '{tmp}/binary.csv' cannot be read as CSV text"),
+    (["run", "pam", "--controller", "pi", "--reference", "{tmp}/full", "--no-plots"], 2,
+     "reference file '{tmp}/full' cannot be read as CSV text"),
+    (["run", "pam", "--controller", "pi", "--reference", "{tmp}/none.csv", "--no-plots"], 2,
+     "reference file '{tmp}/none.csv' does not exist"),
+    (["run", "pam", "--controller", "pi", "--reference", "{tmp}/short.csv", "--duration", "10", "--no-plots"], 2,
+     "--duration 10 s is longer than the reference file '{tmp}/short.csv' (2 s); allowed: up to 2 s"),
+    (["run", "pam", "--controller", "pi", "--no-plots"], 2, "name a scenario (square-10"),
+    # output paths, checked before any work
+    (RUN + SHORT + ["--out", "{tmp}/a_file"], 2, "--out '{tmp}/a_file' is a file; give a folder"),
+    (RUN + SHORT + ["--out", "{tmp}/full"], 2, "--out '{tmp}/full' already holds files; pass --overwrite"),
+    (RUN + SHORT + ["--out", "{tmp}/a_file/sub"], 2, "--out '{tmp}/a_file/sub' cannot be written"),
+    (RUN + SHORT + ["--out", "{tmp}/o", "--json", "{tmp}/full"], 2, "--json '{tmp}/full' is a folder"),
+    (RUN + SHORT + ["--out", "{tmp}/o", "--json", "{tmp}/a_file/x.json"], 2,
+     "--json '{tmp}/a_file/x.json' cannot be written"),
+    (["codegen", "compliant", "--out", "{tmp}/a_file"], 2, "--out '{tmp}/a_file' is a file"),
+    (["speed", "pam", "--out", "{tmp}/full"], 2, "already holds files; pass --overwrite"),
+    # sweep specs and resumes
+    (["sweep", "{tmp}/spec_perturb.toml", "--out", "{tmp}/sw"], 2, "perturb must be a table of KEY = relative "
+     "amplitude, plus samples = N; got 3"),
+    (["sweep", "{tmp}/spec_huge.toml", "--out", "{tmp}/sw"], 2, "above the limit of 10,000; pass --force"),
+    (["sweep", "{tmp}/spec_long.toml", "--out", "{tmp}/sw"], 2, "above the limit of 1,000,000 per run"),
+    (["sweep", "{tmp}/spec_inf.toml", "--out", "{tmp}/sw"], 2, "duration must be a finite number of seconds"),
+    (["sweep", "{tmp}/spec_ok.toml", "--retry-failed", "--out", "{tmp}/sw"], 2, "use it with --resume"),
+    (["sweep", "{tmp}/spec_ok.toml", "--resume", "--out", "{tmp}/corrupt"], 2,
+     "sweep.json cannot be read (JSONDecodeError)"),
+    (["sweep", "{tmp}/spec_ok.toml", "--out", "{tmp}/full"], 2, "is not empty and holds no sweep"),
+    (["sweep", "{tmp}/spec_ok.toml", "--out", "{tmp}/a_file"], 2, "--out '{tmp}/a_file' is a file"),
+    (["sweep", "{tmp}/spec_ok.toml", "--out", "{tmp}/sw", "--json", "{tmp}/full"], 2, "--json '{tmp}/full' is a "
+     "folder"),
+    # --set
+    (RUN + SHORT + ["--set", "pi.kpp=1"], 2, "unknown --set key 'pi.kpp'; did you mean 'pi.kp'?"),
+    (RUN + SHORT + ["--set", "plant.nothing_like_it=1"], 2, "'hystmpc list BENCH' shows every key"),
+    (["run", "compliant", "sine-2", "--controller", "pid", "--set", "plant.hysteresis.ascending=1,2,3"] + SHORT, 2,
+     "expected comma-separated numbers, 2 per point"),
+    (["run", "compliant", "sine-2", "--controller", "pid", "--set", "plant.hysteresis.ascending=1,2,3,1"] + SHORT,
+     2, "points must increase strictly in s and in tau"),
+]
+
+
+def _files(tmp):
+    for name, content in FILES.items():
+        path = tmp / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if isinstance(content, bytes):
+            path.write_bytes(content)
+        else:
+            path.write_text(content)
+
+
+@pytest.mark.parametrize("argv, code, phrase", CASES, ids=[" ".join(c[0])[:70] for c in CASES])
+def test_contract(capsys, tmp_path, argv, code, phrase):
+    _files(tmp_path)
+    before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    assert main(argv) == code
+    out, err = capsys.readouterr()
+    assert out == ""
+    assert err.count("\n") == 1 and err.startswith("hystmpc: error:"), err
+    assert phrase.replace("{tmp}", str(tmp_path)) in err
+    after = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
+    assert after == before  # nothing created, nothing half-written
+
+
+def test_json_dash_writes_the_document_to_standard_output(capsys, tmp_path):
+    assert main(RUN + SHORT + ["--out", str(tmp_path / "o"), "--json", "-"]) == 0
+    out, _ = capsys.readouterr()
+    doc = json.loads(out)
+    assert doc["schema"] == "hystmpc.results/1" and doc["runs"][0]["controller"] == "pi"
+    assert not (tmp_path / "-").exists()
+
+
+def test_overwrite_writes_into_a_used_folder(capsys, tmp_path):
+    out = str(tmp_path / "o")
+    assert main(RUN + SHORT + ["--out", out, "--quiet"]) == 0
+    assert main(RUN + SHORT + ["--out", out, "--quiet"]) == 2
+    assert main(RUN + SHORT + ["--out", out, "--quiet", "--overwrite"]) == 0
+
+
+def test_force_lifts_a_work_limit(capsys, tmp_path):
+    argv = ["run", "pam", "square-20", "--controller", "pi", "--set", "nmpc.horizon=201", "--duration", "0.1",
+            "--no-plots", "--quiet", "--out", str(tmp_path / "o")]
+    assert main(argv) == 2
+    assert main(argv + ["--force"]) == 0
+
+
+def test_list_bench_shows_keys_with_defaults_and_units(capsys):
+    assert main(["list", "pam"]) == 0
+    out = capsys.readouterr().out
+    assert "plant.dp_limit" in out and "6  — Valve command range ±dp_limit (bar)" in out
+    assert "nmpc.horizon" in out and "Prediction horizon N in samples" in out
+    assert main(["list", "pam", "--json"]) == 0
+    keys = {k["key"]: k for k in json.loads(capsys.readouterr().out)["benches"]["pam"]["keys"]}
+    assert keys["nmpc.horizon"]["default"] == 20
