@@ -344,9 +344,13 @@ def read_records(folder: Path, expected: set[str] | None = None,
             records[path.stem] = record
         elif set_aside is not None:
             set_aside.mkdir(parents=True, exist_ok=True)
-            os.replace(path, set_aside / path.name)
-            logging.getLogger("hystmpc").warning(f"record {path.name} {problem}: moved to "
-                                                 f"{set_aside / path.name}; its run is redone")
+            target, n = set_aside / path.name, 1
+            while target.exists():  # an earlier resume set one aside under that name: keep both
+                n += 1
+                target = set_aside / f"{path.stem}.{n}.json"
+            os.replace(path, target)
+            logging.getLogger("hystmpc").warning(f"record {path.name} {problem}: moved to {target}; "
+                                                 "its run is redone")
     return records
 
 
