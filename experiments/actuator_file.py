@@ -273,7 +273,7 @@ class ActuatorSpec:
         horizon = int(np.clip(self.dynamics.delay_samples + round(self._settling() / self.sample_period) + 2, 10, 40))
         config = {"plant": self.plant, "model": model,
                   "nmpc": NmpcSettings(horizon=horizon, q_output=(100 / span_y) ** 2,
-                                       r_rate=1e-3 * (100 / span_u) ** 2, solver="rti"),
+                                       r_rate=1e-3 * (100 / span_u) ** 2, solver="rti-c"),
                   "smoothing": Smoothing(eps=5e-5 * span_u), "solver": SolverSettings(),
                   "pid": PidGains(), "inverse_ff_pid": FeedforwardPidGains()}
         return apply_overrides(config, self.overrides)

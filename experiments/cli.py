@@ -493,6 +493,14 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
             f"{', '.join(sorted({r.controller for r in clipped}))} to the bench's input range [{lo:g}, {hi:g}] "
             f"{bench.input_units}" + (f" and rate {bench.input_rate:g} per sample" if bench.input_rate < float("inf")
                                       else "") + " (guard clips in the table)")
+    for r in runs:  # warnings: shown even with --quiet
+        if r.solver and not r.timing["real_time"]:
+            logging.getLogger("hystmpc").warning(f"not real time on this machine: {r.real_time_verdict()}")
+    oscillating = [f"{r.scenario} · {r.controller} ({r.metrics['oscillation_cycles']:g} cycles at "
+                   f"{r.metrics['oscillation_hz']:.2g} Hz)" for r in runs if r.metrics.get("oscillating")]
+    if oscillating:
+        logging.getLogger("hystmpc").warning("the output oscillates while the reference keeps its direction: "
+                                             + ", ".join(oscillating))
     if not args.quiet and json_target != "-":
         print(table)
         print(f"\nresults: {out / 'results.json'}" + (f" and {args.json_file}" if args.json_file else ""))
@@ -505,6 +513,8 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
             if tuned:
                 print("PID gains (tuned on the nominal model unless set): " + "; ".join(tuned))
         nmpc_runs = [r for r in runs if r.solver]
+        for r in nmpc_runs:
+            print("real time: " + r.real_time_verdict())
         if nmpc_runs and any(r.solver["failures"] for r in nmpc_runs):
             print("note: some NMPC solves failed; the fallback input was applied (see solver.failures)")
     return 0
@@ -580,6 +590,16 @@ def _show(value) -> str:
     return str(value)
 
 
+class _NoticeHandler(logging.StreamHandler):
+    """Writes to the standard error of the last ``main()`` call (not to a run's solver.log);
+    once that stream is closed (a caller that captured it is gone), to the current one."""
+
+    def emit(self, record):
+        if getattr(self.stream, "closed", False):
+            self.stream = sys.stderr
+        super().emit(record)
+
+
 def _log_notices(show: bool) -> None:
     """Notices of long steps (tuning, ...) on stderr as ``hystmpc: ...`` lines, unless ``--quiet``."""
     log = logging.getLogger("hystmpc")
@@ -587,7 +607,7 @@ def _log_notices(show: bool) -> None:
         if getattr(handler, "hystmpc", False):
             handler.stream = sys.stderr  # whatever it is now (setStream would flush the old one: maybe closed)
     if not any(getattr(h, "hystmpc", False) for h in log.handlers):
-        handler = logging.StreamHandler()
+        handler = _NoticeHandler()
         handler.hystmpc = True
         handler.setFormatter(logging.Formatter("hystmpc: %(message)s"))
         log.addHandler(handler)

@@ -45,3 +45,89 @@ def step_metrics(t, reference, output, min_step: float) -> dict[str, float] | No
         steady.append(float(np.mean(seg_r[-tail:] - seg_y[-tail:])))
     return {"overshoot_pct": float(np.mean(overshoot)), "settling_time_s": float(np.mean(settling)),
             "steady_state_error": float(np.mean(np.abs(steady))), "n_steps": len(starts)}
+
+
+OSCILLATION_THRESHOLD = 0.02
+"""A swing of the output counts when it reverses by more than this share of the reference's
+span (or of the output's, for a constant reference)."""
+OSCILLATING_CYCLES = 5.0
+"""A run whose output swings this many cycles in one train, while the reference keeps its
+direction, is flagged as oscillating (a step response that rings for two or three periods
+is not; a limit cycle lasts until the reference turns)."""
+
+
+def reversals(signal, threshold: float) -> np.ndarray:
+    """Indices where ``signal`` turns: it has moved back from its last extremum by more than
+    ``threshold`` (a swing smaller than that, e.g. sensor noise, is not a turn)."""
+    return _turns(signal, threshold)[0]
+
+
+def _turns(signal, threshold: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`reversals` and the direction (+1, −1) the signal moves in after each turn."""
+    x = np.asarray(signal, float)
+    turns, directions = [], []
+    direction, high, low = 0, x[0], x[0]
+    for k in range(1, len(x)):
+        v = x[k]
+        if direction == 0:  # not moved by more than the threshold yet
+            high, low = max(high, v), min(low, v)
+            if high - low > threshold:
+                direction = 1 if v == high else -1
+                extremum = v
+        elif direction * (v - extremum) > 0:
+            extremum = v
+        elif direction * (extremum - v) > threshold:
+            direction, extremum = -direction, v
+            turns.append(k)
+            directions.append(direction)
+    return np.asarray(turns, int), np.asarray(directions, int)
+
+
+def oscillation_metrics(t, reference, output, threshold: float = OSCILLATION_THRESHOLD) -> dict[str, float]:
+    """How much the output swings back and forth on its own, not following the reference.
+
+    The output's turns (:func:`reversals`, by more than ``threshold`` × the reference's span)
+    are grouped into trains: turns between the same two turns or jumps of the reference,
+    each at most twice as far from the previous turn as that one was from its own (a
+    rhythm). The first turn after a turn or jump of the reference, in its direction, is the
+    output following it and does not count. A step response that overshoots turns once; a
+    limit cycle turns twice per period for as long as it lasts.
+
+    Returns ``oscillation_cycles``, the longest train's cycles (turns / 2),
+    ``oscillation_hz``, its frequency (0 below two turns), and ``oscillating``, 1.0 when
+    the cycles reach :data:`OSCILLATING_CYCLES`.
+    """
+    t = np.asarray(t, float)
+    r = np.asarray(reference, float)
+    y = np.asarray(output, float)
+    span = float(np.ptp(r)) or float(np.ptp(y)) or 1.0
+    delta = threshold * span
+    turns, turn_directions = _turns(y, delta)
+    ref_turns, ref_directions = _turns(r, delta)
+    jumps = np.flatnonzero(np.abs(np.diff(r)) > delta) + 1
+    direction_at = dict(zip(ref_turns.tolist(), ref_directions.tolist(), strict=True))
+    direction_at.update({int(k): int(np.sign(r[k] - r[k - 1])) for k in jumps})
+    events = sorted(set(direction_at) | {0, len(r)})
+    longest: list[int] = []
+    for start, end in zip(events[:-1], events[1:], strict=True):
+        inside = (turns >= start) & (turns < end)
+        ks, directions = turns[inside], turn_directions[inside]
+        if len(ks) and directions[0] == direction_at.get(start, 0):
+            ks = ks[1:]  # the output following the reference
+        train: list[int] = []
+        for k in ks:
+            if len(train) >= 2 and k - train[-1] > 2 * (train[-1] - train[-2]):
+                train = []
+            train.append(int(k))
+            if len(train) > len(longest):
+                longest = list(train)
+    cycles = len(longest) / 2
+    hz = (len(longest) - 1) / (2 * (t[longest[-1]] - t[longest[0]])) if len(longest) > 1 else 0.0
+    return {"oscillation_cycles": cycles, "oscillation_hz": float(hz),
+            "oscillating": float(cycles >= OSCILLATING_CYCLES)}
+
+
+def input_metrics(u) -> dict[str, float]:
+    """``input_tv``: the input's total variation Σ|u_k − u_{k−1}| (input units): how much the
+    actuator is moved, chattering included."""
+    return {"input_tv": float(np.sum(np.abs(np.diff(np.asarray(u, float)))))}

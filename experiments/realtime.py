@@ -9,6 +9,7 @@ in-process and with the compiled step and reports the largest difference in appl
 
 from __future__ import annotations
 
+import logging
 import shutil
 import subprocess
 import time
@@ -19,7 +20,7 @@ import casadi as ca
 import numpy as np
 
 from hystmpc.experiments.bench import Bench
-from hystmpc.mpc.rti import _accept_last_qp_iterate
+from hystmpc.mpc.rti import COMPILE_FLAGS, _accept_last_qp_iterate, c_compiler
 
 MAIN_C = r"""/* Replays recorded RTI inputs through rti_step without Python; prints timings.
    Input file: first line "n_w n_p count", then count lines of n_w + n_p numbers (w0, p).
@@ -86,7 +87,7 @@ int main(int argc, char** argv) {
 
 MAKEFILE = """# Builds the RTI solver as a shared library (for Python) and the standalone replay program.
 CC ?= cc
-CFLAGS ?= -O3
+CFLAGS ?= {cflags}
 all: librti_step.so rti_main
 librti_step.so: rti_step.c rti_step.h
 \t$(CC) $(CFLAGS) -fPIC -shared rti_step.c -o librti_step.so -lm
@@ -123,12 +124,15 @@ def _rti_config(bench: Bench, config: dict, solver: str) -> dict:
 
 
 def _compile(out: Path) -> None:
-    cc = shutil.which("cc") or shutil.which("gcc")
+    cc = c_compiler() or shutil.which("gcc")
     if cc is None:
         raise RuntimeError("no C compiler (cc or gcc) on the PATH")
+    size = (out / "rti_step.c").stat().st_size
+    logging.getLogger("hystmpc").info(f"compiling rti_step.c ({size / 1e3:.0f} kB) and the replay program with "
+                                      f"{cc} {' '.join(COMPILE_FLAGS)} in {out}")
     for cmd in (["make", f"CC={cc}", "-s"],) if shutil.which("make") else (
-            [cc, "-O3", "-fPIC", "-shared", "rti_step.c", "-o", "librti_step.so", "-lm"],
-            [cc, "-O3", "main.c", "rti_step.c", "-o", "rti_main", "-lm"]):
+            [cc, *COMPILE_FLAGS, "-fPIC", "-shared", "rti_step.c", "-o", "librti_step.so", "-lm"],
+            [cc, *COMPILE_FLAGS, "main.c", "rti_step.c", "-o", "rti_main", "-lm"]):
         done = subprocess.run(cmd, cwd=out, capture_output=True, text=True)
         if done.returncode != 0:
             raise RuntimeError(f"build failed ({' '.join(cmd)}): {done.stderr.strip()[:2000]}")
@@ -145,7 +149,7 @@ def write_solver(bench: Bench, config: dict, out: Path) -> ca.Function:
     gen.generate(str(out) + "/")
     (out / "rti_step.c").write_text(_accept_last_qp_iterate((out / "rti_step.c").read_text()))
     (out / "main.c").write_text(MAIN_C)
-    (out / "Makefile").write_text(MAKEFILE)
+    (out / "Makefile").write_text(MAKEFILE.replace("{cflags}", " ".join(COMPILE_FLAGS)))
     _compile(out)
     return ca.external("rti_step", str(out / "librti_step.so"))
 

@@ -123,12 +123,23 @@ def _best_per_scenario(runs: list[RunResult]) -> set[int]:
     return {i for s, i in best.items() if counts[s] > 1}
 
 
+def _oscillation_cell(metrics: dict) -> str:
+    cycles = metrics.get("oscillation_cycles")
+    if cycles is None:
+        return "–"
+    if metrics.get("oscillating"):
+        return f"{cycles:g} at {metrics['oscillation_hz']:.2g} Hz (oscillating)"
+    return f"{cycles:g}"
+
+
 def comparison_table(runs: list[RunResult]) -> str:
     """Markdown table (readable in a terminal) of every run, like a paper's table.
 
     Four significant digits for the errors, three for the rest; the least RMSE of each
-    scenario in bold; the paper's RMSE beside ours where the paper has one; a ``guard
-    clips`` column when the plant guard changed any input.
+    scenario in bold; the paper's RMSE beside ours where the paper has one; the input's
+    total variation, the longest output oscillation (cycles, with its frequency when it is
+    flagged), the step time against the sample period; a ``guard clips`` column when the
+    plant guard changed any input.
     """
     stepped = any("overshoot_pct" in r.metrics for r in runs)
     papers = any(r.paper and "rmse" in r.paper for r in runs)
@@ -138,7 +149,9 @@ def comparison_table(runs: list[RunResult]) -> str:
         f"MAE [{units}]", f"max abs error [{units}]"]
     if stepped:
         head += ["overshoot [%]", "settling 2% [s]", f"ss error [{units}]"]
-    head += ["ms/step median", "ms/step p95", "fails/fallbacks"] + (["guard clips"] if guarded else [])
+    input_units = runs[0].labels.input_units if runs else ""
+    head += [f"input TV [{input_units}]", "osc. cycles", "ms/step median", "ms/step p95", "median/period",
+             "fails/fallbacks"] + (["guard clips"] if guarded else [])
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
     best = _best_per_scenario(runs)
     for i, r in enumerate(runs):
@@ -153,7 +166,9 @@ def comparison_table(runs: list[RunResult]) -> str:
             cells += [_fmt(m.get("overshoot_pct")), _fmt(m.get("settling_time_s")),
                       _fmt(m.get("steady_state_error"), 4)]
         timing = r.timing
-        cells += [_fmt(timing["step_ms_median"]), _fmt(timing["step_ms_p95"]),
+        cells += [_fmt(m.get("input_tv")), _oscillation_cell(m),
+                  _fmt(timing["step_ms_median"]), _fmt(timing["step_ms_p95"]),
+                  f"{timing['median_share_of_period']:.0%}" + ("" if timing["real_time"] else " (not real time)"),
                   f"{r.solver['failures']}/{r.solver['fallbacks']}" if r.solver else "–"]
         if guarded:
             cells.append(str(r.guard["clips"]) if r.guard else "–")

@@ -15,7 +15,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from hystmpc.experiments.metrics import step_metrics, tracking_metrics
+from hystmpc.experiments.metrics import input_metrics, oscillation_metrics, step_metrics, tracking_metrics
 from hystmpc.plants.base import Measurement, Plant
 
 
@@ -103,10 +103,28 @@ class RunResult:
 
     @property
     def timing(self) -> dict[str, float]:
-        """Controller compute per sample (ms): median, p95, max."""
+        """Controller compute per sample (ms): median, p95, max; and median and p95 as a
+        share of the sample period (``real_time``: the median fits in the period)."""
         ms = 1e3 * self.step_times
-        return {"step_ms_median": float(np.median(ms)), "step_ms_p95": float(np.percentile(ms, 95)),
-                "step_ms_max": float(ms.max())}
+        median, p95 = float(np.median(ms)), float(np.percentile(ms, 95))
+        period_ms = 1e3 * self.sample_period
+        return {"step_ms_median": median, "step_ms_p95": p95, "step_ms_max": float(ms.max()),
+                "median_share_of_period": median / period_ms, "p95_share_of_period": p95 / period_ms,
+                "real_time": bool(median <= period_ms)}
+
+    def real_time_verdict(self) -> str:
+        """One line: the median and p95 step against the sample period, and whether the
+        controller keeps up with it on this machine (judged on the median)."""
+        t = self.timing
+        if not t["real_time"]:
+            verdict = "NOT real time: the median step exceeds the period"
+        elif t["p95_share_of_period"] > 1:
+            verdict = "real time on the median, but 1 step in 20 or more exceeds the period"
+        else:
+            verdict = "real time"
+        return (f"{self.scenario} · {self.controller}: median {t['step_ms_median']:.3g} ms "
+                f"({t['median_share_of_period']:.0%} of the {1e3 * self.sample_period:g} ms period), "
+                f"p95 {t['step_ms_p95']:.3g} ms ({t['p95_share_of_period']:.0%}): {verdict}")
 
     def to_json(self) -> dict[str, Any]:
         """The run as an element of a result document's ``runs`` (interface.md), strict JSON."""
@@ -266,6 +284,8 @@ def simulate(plant: Plant, controller: Controller, reference, duration: float | 
     span = float(np.ptp(ref))
     if span > 0 and np.any(np.abs(np.diff(ref)) > 0.25 * span):  # a stepped reference
         metrics.update(step_metrics(t, ref, out, min_step=0.25 * span) or {})
+    metrics.update(oscillation_metrics(t, ref, out))
+    metrics.update(input_metrics(u_hist))
     if scenario is None:
         scenario = reference.name if isinstance(reference, Scenario) else "reference"
     return RunResult(scenario=scenario, controller=name or type(controller).__name__, seed=seed,

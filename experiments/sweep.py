@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 SPEC_KEYS = ("bench", "scenarios", "controllers", "seeds", "perturb", "duration", "set", "perturb_seed")
-METRICS = ("rmse", "mae", "max_abs_error")
+METRICS = ("rmse", "mae", "max_abs_error", "input_tv", "oscillation_cycles")
 CHALLENGER = "nmpc"
 """The controller whose wins against the others the summary counts."""
 WARNING_LINES_KEPT = 20
@@ -417,6 +417,7 @@ def summarize(spec: SweepSpec, records: dict[str, dict[str, Any]], metric: str =
                      "failed": len(rs) - len(ok)}
             for m in METRICS:
                 group[m] = _quartiles([r["metrics"][m] for r in ok if r["metrics"].get(m) is not None])
+            group["oscillating"] = int(sum(bool(r["metrics"].get("oscillating")) for r in ok))
             group["guard_clips"] = int(sum((r.get("guard") or {}).get("clips", 0) for r in ok))
             if any("solver" in r for r in ok):
                 group["solver_failures"] = int(sum(r.get("solver", {}).get("failures", 0) for r in ok))
@@ -471,14 +472,14 @@ def write_summary_csv(summary: dict[str, Any], path: Path) -> None:
     wins = summary.get("win_rates", {})
     with open(path, "w", newline="") as f:
         writer = csv.writer(f)
-        writer.writerow(["scenario", "controller", "runs", "failed"]
+        writer.writerow(["scenario", "controller", "runs", "failed", "oscillating"]
                         + [f"{m}_{q}" for m in METRICS for q in ("q1", "median", "q3")]
                         + ["nmpc_win_rate", "nmpc_win_rate_vs_best_baseline"])
         for g in summary["groups"]:
             rates = wins.get(g["scenario"], {})
             vs = rates.get("vs", {}).get(g["controller"], {}).get("rate")
             best = rates.get("vs_best_baseline", {}).get("rate") if g["controller"] == CHALLENGER else None
-            writer.writerow([g["scenario"], g["controller"], g["runs"], g["failed"]]
+            writer.writerow([g["scenario"], g["controller"], g["runs"], g["failed"], g.get("oscillating", "")]
                             + [_fmt(g[m][q]) for m in METRICS for q in ("q1", "median", "q3")]
                             + [_fmt(vs), _fmt(best)])
 
@@ -489,8 +490,9 @@ def _fmt(value) -> str:
 
 def summary_table(summary: dict[str, Any], units: str) -> str:
     """Markdown table: per scenario and controller, RMSE quartiles, failures and nmpc's win rate."""
-    lines = [f"| scenario | controller | runs | failed | RMSE median [{units}] | RMSE q1–q3 | nmpc wins |",
-             "|---|---|---:|---:|---:|---|---:|"]
+    lines = [f"| scenario | controller | runs | failed | oscillating | RMSE median [{units}] | RMSE q1–q3 | "
+             "input TV median | nmpc wins |",
+             "|---|---|---:|---:|---:|---:|---|---:|---:|"]
     wins = summary.get("win_rates", {})
     for g in summary["groups"]:
         r = g["rmse"]
@@ -504,8 +506,10 @@ def summary_table(summary: dict[str, Any], units: str) -> str:
         win = f"{rate['rate']:.0%} of {rate['compared']} {label}".strip() if rate.get("rate") is not None else "–"
         spread = f"{r['q1']:.4g}–{r['q3']:.4g}" if r["median"] is not None else "–"
         median = f"{r['median']:.4g}" if r["median"] is not None else "–"
-        lines.append(f"| {g['scenario']} | {g['controller']} | {g['runs']} | {g['failed']} | {median} | "
-                     f"{spread} | {win} |")
+        tv = g.get("input_tv", {}).get("median")
+        lines.append(f"| {g['scenario']} | {g['controller']} | {g['runs']} | {g['failed']} | "
+                     f"{g.get('oscillating', '–')} | {median} | {spread} | {'–' if tv is None else f'{tv:.4g}'} | "
+                     f"{win} |")
     return "\n".join(lines)
 
 

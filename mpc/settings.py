@@ -13,11 +13,12 @@ from typing import Any
 import numpy as np
 
 SOLVERS = ("ipopt", "sqp", "rti", "rti-c", "gn")
-"""Solver variants: IPOPT (robust default); CasADi sqpmethod + qrqp; ``rti``, one Gauss–Newton
+"""Solver variants: IPOPT; CasADi sqpmethod + qrqp; ``rti``, one Gauss–Newton
 SQP step per sample as one CasADi Function (:mod:`hystmpc.mpc.rti`; on multiple-shooting
 problems condensed onto the inputs, with the interior-point QP of :mod:`hystmpc.mpc.qp`);
-``rti-c``, the same generated as C, compiled and loaded; ``gn``, Gauss–Newton SQP to
-convergence (single-shooting problems only)."""
+``rti-c`` (the default), the same generated as C, compiled and loaded (in-process, with a
+notice, when there is no C compiler); ``gn``, Gauss–Newton SQP to convergence
+(single-shooting problems only)."""
 WARM_STARTS = ("inverse", "shift", "cold")
 
 
@@ -41,8 +42,10 @@ class NmpcSettings:
     """Weight on the squared input change per sample (keeps sensor noise out of the input)."""
     r_input: float = 0.0
     """Weight on the squared deviation of the input from the inverse-model input."""
-    solver: str = "ipopt"
-    """Solver variant, one of :data:`SOLVERS`; its settings are ``solver.<name>``."""
+    solver: str = "rti-c"
+    """Solver variant, one of :data:`SOLVERS`; its settings are ``solver.<name>``. The
+    default, ``rti-c``, tracks within 0.3 % of IPOPT's RMSE at a tenth of its time
+    (docs/realtime.md); a bench may choose another."""
     preview: bool = True
     """Use the known future reference over the horizon; false holds the current one."""
     warm_start: str = "inverse"

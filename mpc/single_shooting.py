@@ -15,7 +15,7 @@ import casadi as ca
 import numpy as np
 
 from hystmpc.mpc.problem import Solution, TrackingProblem
-from hystmpc.mpc.rti import compile_function, rti_function
+from hystmpc.mpc.rti import compiled_or_in_process, rti_function
 from hystmpc.mpc.settings import InputBounds, NmpcSettings, SolverSettings
 
 
@@ -93,7 +93,7 @@ class SingleShootingProblem(TrackingProblem):
         self.rti = rti_function(residual, constraints, b["lbg"], b["ubg"], b["lbx"], b["ubx"],
                                 step_lengths=(0.5, 0.25, 0.125))
         if self.settings.solver == "rti-c":
-            self.rti = compile_function(self.rti)
+            self.rti, self.compiled = compiled_or_in_process(self.rti)
 
     def _solve_gauss_newton(self, u, p):
         """Gauss–Newton SQP: QP on JᵀJ, backtracking on the cost; returns (u, ok, status, iters)."""

@@ -23,9 +23,11 @@ SAMPLES = 30
 QUICK_EXAMPLES = {"pam": 2, "compliant": 2, "reluctance": 1, "dea": 2}
 """Closed loops per bench in the default suite (a reluctance example identifies its model: ~10 s)."""
 SLOW_EXAMPLES = 25
-BASE = {"reluctance": ["identification.duration=0.5"]}
+BASE = {"reluctance": ["identification.duration=0.5"], "pam": ["nmpc.solver=rti"], "compliant": ["nmpc.solver=rti"]}
 """Settings under every example: the reluctance model is identified from shorter simulated
-loops (a quarter of the default), which keeps an example to seconds."""
+loops (a quarter of the default), which keeps an example to seconds. pam and compliant run
+their RTI step in-process: every perturbed model would otherwise compile its own C step
+(seconds each), and the compiled step is the same function (test_realtime's round trip)."""
 
 
 class RecordingPlant:

@@ -5,7 +5,14 @@ import pytest
 
 from hystmpc.experiments.benches.pam import BENCH
 from hystmpc.experiments.config import allowed_keys, apply_overrides
-from hystmpc.experiments.metrics import step_metrics, tracking_metrics
+from hystmpc.experiments.metrics import (
+    OSCILLATING_CYCLES,
+    input_metrics,
+    oscillation_metrics,
+    reversals,
+    step_metrics,
+    tracking_metrics,
+)
 from hystmpc.experiments.report import SCHEMA, validate_document
 
 
@@ -25,6 +32,39 @@ def test_step_metrics_first_order_response():
     assert m["settling_time_s"] == pytest.approx(tau * np.log(50), abs=2 * dt)  # e^{-t/τ} = 2 %
     assert m["steady_state_error"] <= np.exp(-1.4 / tau)  # window starts at 7/8 of 1.6 s
     assert m["n_steps"] == 1
+
+
+def _square_response(t, ring_decay: float, seed: int = 0):
+    """A ±10 square wave at 0.1 Hz and a response ringing at 3.5 Hz after each step (decay
+    rate ``ring_decay`` 1/s; 0: a limit cycle), with sensor noise below the threshold."""
+    r = np.where(np.mod(t, 10.0) < 5.0, 10.0, -10.0)
+    since = np.mod(t, 5.0)
+    y = r - 2.0 * np.sign(r) * np.exp(-ring_decay * since) * np.cos(2 * np.pi * 3.5 * since)
+    return r, y + 0.05 * np.random.default_rng(seed).standard_normal(len(t))
+
+
+def test_reversals_ignore_swings_below_the_threshold():
+    x = np.array([0, 1, 0.9, 2, 1.5, 3, 0, 0.05, -1, 2])
+    assert list(reversals(x, 0.3)) == [4, 5, 6, 9]
+    assert list(reversals(x, 1.0)) == [6, 9]
+    assert len(reversals(np.zeros(10), 0.1)) == 0
+
+
+def test_oscillation_flags_a_limit_cycle_and_not_a_damped_ring():
+    t = 0.02 * np.arange(1000)
+    r, cycle = _square_response(t, 0.0)
+    m = oscillation_metrics(t, r, cycle)
+    assert m["oscillating"] == 1.0 and m["oscillation_cycles"] >= OSCILLATING_CYCLES
+    assert m["oscillation_hz"] == pytest.approx(3.5, rel=0.05)
+    r, ring = _square_response(t, 6.0)  # 2 % of the span after about 0.6 s: two periods
+    m = oscillation_metrics(t, r, ring)
+    assert m["oscillating"] == 0.0 and 0 < m["oscillation_cycles"] < OSCILLATING_CYCLES
+    smooth = 10 * np.sin(2 * np.pi * 0.1 * t)
+    assert oscillation_metrics(t, smooth, smooth)["oscillation_cycles"] == 0.0
+
+
+def test_input_total_variation():
+    assert input_metrics([0.0, 1.0, -1.0, -1.0, 2.0])["input_tv"] == pytest.approx(6.0)
 
 
 def test_overrides_nested_and_typed():

@@ -93,7 +93,7 @@ def test_nmpc_is_offset_free_under_constant_model_mismatch():
 def test_failed_solve_falls_back_and_is_counted():
     """One iteration per sample cannot converge: every step falls back, none sends NaN."""
     config = BENCH.configure()
-    config["nmpc"] = NmpcSettings(horizon=5)
+    config["nmpc"] = NmpcSettings(horizon=5, solver="ipopt")
     config["solver"] = SolverSettings(ipopt=NlpSettings(max_iter=1))
     run = BENCH.run("square-10", "nmpc", config, duration=0.5)
     assert run.solver["failures"] > 0

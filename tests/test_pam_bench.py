@@ -40,3 +40,35 @@ def test_full_comparison_meets_the_issue(tmp_path, capsys):
             for column in ("t", "reference", "output", "input"):
                 assert np.all(np.isfinite(data[column])), (scenario, c, column)
     assert (tmp_path / "res" / "rmse.png").is_file()
+
+
+JOINT_7 = {"plant.arm_inertia": 0.816, "plant.creep_torque": 1.111, "plant.damping": 1.12, "plant.hysteresis.k": 0.991,
+           "plant.hysteresis.w": 1.136, "plant.passive_stiffness": 1.179, "plant.payload_kg": 0.85,
+           "plant.pressure_wn": 1.014, "plant.pressure_zeta": 0.982, "plant.torque_per_bar": 1.164}
+"""Perturbation sample 7 of experiments/sweeps/pam.toml (perturb_seed 0): a lighter, stronger joint."""
+JOINT_16 = {"plant.arm_inertia": 1.112, "plant.creep_torque": 1.029, "plant.damping": 1.088,
+            "plant.hysteresis.k": 1.173, "plant.hysteresis.w": 0.873, "plant.passive_stiffness": 0.873,
+            "plant.payload_kg": 0.815, "plant.pressure_wn": 1.164, "plant.pressure_zeta": 0.801,
+            "plant.torque_per_bar": 0.935}
+"""Sample 16: a faster, less damped pressure loop."""
+OLD_TUNING = ["estimator.velocity=1e-2", "estimator.disturbance=1e-4", "nmpc.r_rate=0.3"]
+"""The NMPC's estimator and rate weight before the limit cycle was found."""
+
+
+def _joint_run(factors: dict, extra=()) -> dict:
+    from hystmpc.experiments.sweep import scaled_assignments
+    config = BENCH.configure([*scaled_assignments(BENCH.configure(), factors), *extra])
+    return BENCH.run("sine-30", "nmpc", config, duration=8.0).metrics
+
+
+@pytest.mark.parametrize("factors", [JOINT_7, JOINT_16], ids=["joint-7", "joint-16"])
+def test_nmpc_does_not_limit_cycle_on_perturbed_joints(factors):
+    metrics = _joint_run(factors)
+    assert metrics["oscillating"] == 0.0 and metrics["oscillation_cycles"] <= 1, metrics
+    assert metrics["rmse"] < 0.6, metrics
+
+
+def test_the_old_tuning_limit_cycles_on_joint_7():
+    """The measure sees the 3–4 Hz limit cycle the pam sweep found."""
+    metrics = _joint_run(JOINT_7, OLD_TUNING)
+    assert metrics["oscillating"] == 1.0 and 2.5 < metrics["oscillation_hz"] < 5, metrics

@@ -9,7 +9,7 @@ inverse model). Scenarios: square waves of 10–40° at 0.1 Hz (two cycles, Fig.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -45,6 +45,29 @@ a slower, less damped pressure loop with a slew limit and volume coupling, and a
 creep drift over 20 s (vo2012 Section 1: creep makes the joint time-varying)."""
 
 
+@dataclass(frozen=True)
+class EstimatorNoise:
+    """Process noise of the NMPC's EKF where the model is least sure (``--set estimator.KEY=VALUE``).
+
+    The EKF estimates the joint's states and an unknown torque ``d``. If it trusts the
+    model's velocity dynamics and lets ``d`` move fast, an inertia or gain error in the
+    model is read as a torque that changes with the acceleration, and the NMPC's answer to
+    it closes a 3–4 Hz limit cycle (docs/pam.md). A large velocity noise makes the estimate
+    follow the encoder instead; ``d`` then takes up what stays: creep, payload, friction.
+    """
+
+    velocity: float = 10.0
+    """Variance per sample of the joint rate ω ((deg/s)²)."""
+    disturbance: float = 1e-3
+    """Variance per sample of the disturbance torque d ((N m)²)."""
+
+    def __post_init__(self):
+        for name in ("velocity", "disturbance"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"estimator.{name} must be finite and > 0, got {value}")
+
+
 def build_pi(config: dict, compensate: bool) -> PidController:
     """vo2012 Fig. 1: PI on the angle error, optionally plus Δp_hys from the MS model.
 
@@ -61,7 +84,8 @@ def build_nmpc(config: dict) -> NmpcController:
     smoothing: Smoothing = config["smoothing"]
     pm = prediction_model(model, smoothing.eps, smoothing.direction)
     D, M = model.delay_samples, model.hysteresis.n_elements
-    q_noise = [1e-6, 1e-2, 1e-5, 1e-2] + [1e-7] * M + [1e-12] * D + [1e-4]
+    noise: EstimatorNoise = config["estimator"]
+    q_noise = [1e-6, noise.velocity, 1e-5, 1e-2] + [1e-7] * M + [1e-12] * D + [noise.disturbance]
     quantum = 360.0 / model.encoder_counts
     ekf = DisturbanceEKF(pm, q_noise, [quantum**2 / 12 + 1e-6, model.pressure_noise_bar**2 + 1e-6])
     p0 = [1e-3, 1.0, 1e-3, 1.0] + [1e-4] * M + [1e-12] * D + [0.1]
@@ -87,11 +111,11 @@ def _sine(amplitude: float) -> Scenario:
 
 def _defaults() -> dict:
     # PI gains (bar/deg, bar/(deg s)) from a grid search; see docs/pam.md.
-    return {"plant": PLANT, "model": NOMINAL, "pi": PidGains(kp=0.08, ki=0.4), "nmpc": NmpcSettings(),
-            "smoothing": Smoothing(eps=1e-3), "solver": SolverSettings()}
+    return {"plant": PLANT, "model": NOMINAL, "pi": PidGains(kp=0.08, ki=0.4), "nmpc": NmpcSettings(r_rate=10.0),
+            "smoothing": Smoothing(eps=1e-3), "solver": SolverSettings(), "estimator": EstimatorNoise()}
 
 
-NMPC_GROUPS = ("model", "nmpc", "smoothing", "solver")
+NMPC_GROUPS = ("model", "nmpc", "smoothing", "solver", "estimator")
 MODEL_ONLY = "the controllers' model has no {}; it is the plant's (plant.{})"
 
 BENCH = Bench(
