@@ -37,7 +37,7 @@ def _changed(bench_name: str, key: str, value) -> str:
     field = key.rsplit(".", 1)[-1]
     if field == "solver":
         return OTHER_SOLVER[bench_name]
-    if VALUES.get(field) is not None:
+    if VALUES.get(field) is not None and VALUES[field] != str(value):  # else the bench's default: change it
         return VALUES[field]
     if isinstance(value, bool):
         return str(not value).lower()
