@@ -44,7 +44,7 @@ class NmpcSettings:
     """Weight on the squared deviation of the input from the inverse-model input."""
     solver: str = "rti-c"
     """Solver variant, one of :data:`SOLVERS`; its settings are ``solver.<name>``. The
-    default, ``rti-c``, tracks within 0.3 % of IPOPT's RMSE at a tenth of its time
+    default, ``rti-c``, tracked within 0.1 % of IPOPT's RMSE on pam at a tenth of its time
     (docs/realtime.md); a bench may choose another."""
     preview: bool = True
     """Use the known future reference over the horizon; false holds the current one."""
