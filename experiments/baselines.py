@@ -5,7 +5,11 @@ feed-forward in front of it.
 * :class:`InverseFeedforward`: the inverse hysteresis model turns the reference into an
   input (the classic inverse-model compensation; zhou2024 Fig. 14);
 * :class:`HysteresisCompensation`: the hysteresis model fed by the *measured* output,
-  added to the command (vo2012 Fig. 1).
+  added to the command (vo2012 Fig. 1);
+* :class:`AdditiveCompensation` and :class:`InverseCompensation`: the two ways an inverse
+  model sits between the virtual input of :class:`hystmpc.mpc.linear_mpc.InverseLinearMpc`
+  (``inverse-lmpc``) and the actuator: an offset added to it, or the inverse hysteresis
+  in series.
 
 :func:`inverse_feedforward_pid` puts the first two together for any model that has an inverse.
 """
@@ -188,6 +192,121 @@ class HysteresisCompensation:
             self._state = self.hysteresis.initial_state(measurement.y)
         self._state, value = self.hysteresis.step(self._state, measurement.y)
         return float(value)
+
+
+class AdditiveCompensation:
+    """``u = v + c(measurement)``: a compensation computed from what is measured (vo2012 Fig. 1
+    style), for :class:`hystmpc.mpc.linear_mpc.InverseLinearMpc`.
+
+    Parameters
+    ----------
+    offset : callable
+        ``measurement -> c``, called once per sample; may keep a memory (``offset.reset()``
+        is called on reset when it exists).
+    sensors : callable
+        ``(measurement, c) -> z``: the linear model's sensor vector.
+    """
+
+    def __init__(self, offset: Callable, sensors: Callable):
+        self._offset, self._sensors = offset, sensors
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the offset and its memory."""
+        if hasattr(self._offset, "reset"):
+            self._offset.reset()
+        self.offset = 0.0
+
+    def update(self, measurement) -> None:
+        """This sample's offset."""
+        self.offset = float(self._offset(measurement))
+
+    def to_input(self, v: float) -> float:
+        """``v + c``."""
+        return v + self.offset
+
+    def to_virtual(self, u: float) -> float:
+        """``u − c``."""
+        return u - self.offset
+
+    def applied(self, u: float) -> None:
+        """Nothing: the offset follows the measurement."""
+
+    def sensors(self, measurement) -> np.ndarray:
+        """The linear model's sensors."""
+        return np.asarray(self._sensors(measurement, self.offset), float)
+
+
+class InverseCompensation:
+    """``u = input_of(H⁻¹[hysteresis_output_of(v)])``: the inverse hysteresis in series with
+    the actuator input, for :class:`hystmpc.mpc.linear_mpc.InverseLinearMpc`. The virtual
+    input ``v`` is the hysteresis output (through an optional static map).
+
+    Parameters
+    ----------
+    hysteresis : HysteresisModel
+        The nominal model (its ``step`` and ``inverse_step``).
+    sensors : callable
+        ``(measurement, compensation) -> z``: the linear model's sensor vector
+        (``compensation.output`` is the model's output at its memory).
+    driven_by : callable, optional
+        ``measurement -> hysteresis input``: the memory follows a measured signal; None:
+        it follows the applied inputs.
+    input_of, hysteresis_input_of : callable, optional
+        Between the hysteresis input and the actuator input, both ways (default: the same).
+    virtual_of, hysteresis_output_of : callable, optional
+        Between the hysteresis output and the virtual input, both ways, monotone
+        (default: the same; a static output map, such as force from flux).
+    """
+
+    def __init__(self, hysteresis: HysteresisModel, sensors: Callable, driven_by: Callable | None = None,
+                 input_of: Callable | None = None, hysteresis_input_of: Callable | None = None,
+                 virtual_of: Callable | None = None, hysteresis_output_of: Callable | None = None):
+        self.hysteresis, self._sensors, self._driven_by = hysteresis, sensors, driven_by
+        self._input_of = input_of or (lambda s: s)
+        self._hysteresis_input_of = hysteresis_input_of or (lambda u: u)
+        self._virtual_of = virtual_of or (lambda h: h)
+        self._hysteresis_output_of = hysteresis_output_of or (lambda v: v)
+        self.reset()
+
+    def reset(self) -> None:
+        """The model at rest."""
+        self._state = None
+
+    @property
+    def output(self) -> float:
+        """The model's output at its memory."""
+        return float(self.hysteresis.output(self._state))
+
+    def update(self, measurement) -> None:
+        """Move the memory along the measured hysteresis input (when it follows one)."""
+        if self._driven_by is not None:
+            s = float(self._driven_by(measurement))
+            self._state = (self.hysteresis.initial_state(s) if self._state is None
+                           else self.hysteresis.step(self._state, s)[0])
+        elif self._state is None:
+            self._state = self.hysteresis.initial_state()
+
+    def to_input(self, v: float) -> float:
+        """The input that gives the virtual input ``v`` from the present memory."""
+        try:
+            target = float(self._hysteresis_output_of(v))
+            return float(self._input_of(self.hysteresis.inverse_step(self._state, target)[1]))
+        except ValueError:  # beyond the model's reach: the nearest input the bounds allow follows
+            return np.nan
+
+    def to_virtual(self, u: float) -> float:
+        """The virtual input the input ``u`` gives from the present memory."""
+        return float(self._virtual_of(self.hysteresis.step(self._state, float(self._hysteresis_input_of(u)))[1]))
+
+    def applied(self, u: float) -> None:
+        """Move the memory with the applied input (when it follows the inputs)."""
+        if self._driven_by is None:
+            self._state = self.hysteresis.step(self._state, float(self._hysteresis_input_of(u)))[0]
+
+    def sensors(self, measurement) -> np.ndarray:
+        """The linear model's sensors."""
+        return np.asarray(self._sensors(measurement, self), float)
 
 
 def inverse_feedforward_pid(hysteresis: HysteresisModel, gains: PidGains, sample_period: float,

@@ -5,12 +5,15 @@
 * :class:`NmpcSettings`, :class:`InputBounds`, :class:`SolverSettings`: what it is told.
 * :class:`MultipleShootingProblem`, :class:`SingleShootingProblem`: the tracking NLPs.
 * :class:`DisturbanceEKF`, :class:`StateObserver`, :class:`MemoryObserver`: estimation.
+* :class:`InverseLinearMpc`, :class:`LinearMpcSettings`: the strong conventional
+  alternative, an inverse-model compensation plus an offset-free linear MPC (OSQP).
 * :mod:`hystmpc.mpc.rti`: the real-time iteration step as one code-generatable Function;
   :mod:`hystmpc.mpc.qp`: the interior-point QP it uses.
 """
 
 from hystmpc.mpc.controller import NmpcController, default_observer
 from hystmpc.mpc.estimator import DisturbanceEKF
+from hystmpc.mpc.linear_mpc import InverseLinearMpc, LinearMpcSettings
 from hystmpc.mpc.multiple_shooting import MultipleShootingProblem
 from hystmpc.mpc.observer import Estimate, MemoryObserver, StateObserver, memory_inverse
 from hystmpc.mpc.problem import Solution
@@ -25,7 +28,8 @@ from hystmpc.mpc.settings import (
 )
 from hystmpc.mpc.single_shooting import SingleShootingProblem
 
-__all__ = ["SOLVERS", "DisturbanceEKF", "Estimate", "GaussNewtonSettings", "InputBounds", "MemoryObserver",
+__all__ = ["SOLVERS", "DisturbanceEKF", "Estimate", "GaussNewtonSettings", "InputBounds", "InverseLinearMpc",
+           "LinearMpcSettings", "MemoryObserver",
            "MultipleShootingProblem", "NlpSettings", "NmpcController", "NmpcSettings",
            "RtiSettings", "SingleShootingProblem", "Solution", "SolverSettings", "StateObserver",
            "default_observer", "memory_inverse"]

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from hystmpc.models.integrators import rk4
 from hystmpc.models.power_function import PowerFunctionHysteresis, VirtualDeformation
 from hystmpc.models.prediction import Dynamics, PredictionModel, build_prediction_model
 from hystmpc.plants.base import Measurement, ParametrisedPlant
@@ -157,3 +158,21 @@ def initial_state(p: CompliantParams, z) -> np.ndarray:
     """Model state at rest from the first sensor vector ``[motor angle, torque]``."""
     s = float(p.geometry.s(z[0]))
     return np.concatenate(([z[0], 0.0], p.hysteresis.initial_state(s), np.full(p.command_delay, z[0])))
+
+
+def linear_model(p: CompliantParams, substeps: int = 2) -> PredictionModel:
+    """The servo alone, in torque units, for ``inverse-lmpc``: the virtual torque ``v`` (the
+    power-function model's output that the inverse compensation realises) follows the command
+    as θ1 does, ``x = [τ_v, τ_v', q_1..q_D]``, ``y = τ_v + d``. Sensors: ``τ_v`` (the
+    model's torque at the measured motor angle) and the torque."""
+    D = p.command_delay
+    x, v, d = ca.SX.sym("x", 2 + D), ca.SX.sym("v"), ca.SX.sym("d")
+    command = x[2] if D else v
+    x_dyn = rk4(lambda xs, _t: ca.vertcat(*servo_rhs(p, xs, command)), x[:2], p.sample_period / substeps, substeps)
+    x_next = ca.vertcat(x_dyn, *[x[2 + i] for i in range(1, D)], *([v] if D else []))
+    names = ("torque_v", "torque_v_rate", *(f"delay_{i + 1}" for i in range(D)))
+    return PredictionModel(
+        step=ca.Function("compliant_linear_step", [x, v, d], [x_next], ["x", "u", "d"], ["x_next"]),
+        output=ca.Function("compliant_linear_output", [x, d], [x[0] + d], ["x", "d"], ["y"]),
+        measure=ca.Function("compliant_linear_measure", [x, d], [ca.vertcat(x[0], x[0] + d)], ["x", "d"], ["z"]),
+        sample_period=p.sample_period, state_names=names, sensor_names=("angle", "y"))

@@ -22,7 +22,7 @@ import numpy as np
 
 from hystmpc.models.fckp import Fckp, FckpParams
 from hystmpc.models.integrators import rk4
-from hystmpc.models.prediction import CreepPredictionModel, Dynamics, build_prediction_model
+from hystmpc.models.prediction import CreepPredictionModel, Dynamics, PredictionModel, build_prediction_model
 from hystmpc.plants.base import Measurement, ParametrisedPlant
 
 
@@ -99,6 +99,30 @@ def prediction_model(p: DeaParams, eps: float, direction_eps: float | None = Non
     return build_prediction_model(Fckp(p.fckp), p.sample_period, dynamics=dynamics, eps=eps,
                                   direction_eps=direction_eps, disturbance="hysteresis",
                                   creep_order=p.fckp.creep_order, name="dea")
+
+
+def linear_model(p: DeaParams, operating_point: float = 1.5, substeps: int = 2) -> PredictionModel:
+    """The mechanics linearised at ``x1 = operating_point`` (mm), driven by the FCKP output W
+    (the virtual input of ``inverse-lmpc``) plus an input disturbance ``d`` (mm, as in
+    :func:`prediction_model`); the creep is left to ``d``. Sensor: the laser."""
+    x, w, d = ca.SX.sym("x", 2), ca.SX.sym("w"), ca.SX.sym("d")
+    x0 = ca.DM([operating_point, 0.0])
+    w0 = float(steady_output_input(p, operating_point))
+    exact = ca.vertcat(*mechanics_rhs(p, x, w, 0.0, tanh=ca.tanh))
+    at = {"x": x0, "w": w0}
+    jx = ca.Function("jx", [x, w], [ca.jacobian(exact, x)])(at["x"], at["w"])
+    jw = ca.Function("jw", [x, w], [ca.jacobian(exact, w)])(at["x"], at["w"])
+    A, B = np.asarray(jx, float), np.asarray(jw, float).ravel()
+
+    def rhs(xs, _t):  # f(x0, w0) = 0: the tangent dynamics around the operating point
+        return ca.mtimes(ca.DM(A), xs - x0) + ca.DM(B) * (w - w0 + d)
+
+    x_next = rk4(rhs, x, p.sample_period / substeps, substeps)
+    return PredictionModel(
+        step=ca.Function("dea_linear_step", [x, w, d], [x_next], ["x", "u", "d"], ["x_next"]),
+        output=ca.Function("dea_linear_output", [x, d], [x[0]], ["x", "d"], ["y"]),
+        measure=ca.Function("dea_linear_measure", [x, d], [x[0]], ["x", "d"], ["z"]),
+        sample_period=p.sample_period, state_names=("displacement", "velocity"))
 
 
 def disturbance(t, amplitude: float, omega: float):

@@ -16,6 +16,7 @@ angle range within the same pressures.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field, replace
 
 import casadi as ca
@@ -190,6 +191,42 @@ def inverse_inputs(p: PamJointParams, x, d, refs) -> np.ndarray:
     return need
 
 
+def linear_model(p: PamJointParams, substeps: int = 2) -> PredictionModel:
+    """The joint linearised at θ = 0 without hysteresis, for ``inverse-lmpc``.
+
+    Input: the *effective* pressure command ``v`` (bar) that the compensation of
+    :func:`static_compensation` turns into a valve command; ``x = [θ, ω, Δp_v, Δp_v',
+    q_1..q_D]`` with ``Δp_v`` the effective pressure; ``d``: an unknown torque (N m), as in
+    :func:`prediction_model`. ``J θ'' = a0 Δp_v − (K + m g L) θ − c θ' + d``: a(θ), b(θ)
+    and the payload linearised at 0. Sensors: angle and effective pressure.
+    """
+    D = p.delay_samples
+    x, v, d = ca.SX.sym("x", 4 + D), ca.SX.sym("v"), ca.SX.sym("d")
+    command = x[4] if D else v
+    stiffness = (p.passive_stiffness + p.payload_kg * GRAVITY * p.lever_m) * DEG  # N m/deg
+
+    def rhs(xs, _t):
+        acc = (p.torque_per_bar * xs[2] - stiffness * xs[0] - p.damping * xs[1] * DEG + d) / p.inertia / DEG
+        dd = p.pressure_wn**2 * (command - xs[2]) - 2 * p.pressure_zeta * p.pressure_wn * xs[3]
+        return ca.vertcat(xs[1], acc, xs[3], dd)
+
+    x_dyn = rk4(rhs, x[:4], p.sample_period / substeps, substeps)
+    x_next = ca.vertcat(x_dyn, *[x[4 + i] for i in range(1, D)], *([v] if D else []))
+    names = ("angle", "rate", "pressure", "pressure_rate", *(f"delay_{i + 1}" for i in range(D)))
+    return PredictionModel(
+        step=ca.Function("pam_linear_step", [x, v, d], [x_next], ["x", "u", "d"], ["x_next"]),
+        output=ca.Function("pam_linear_output", [x, d], [x[0]], ["x", "d"], ["y"]),
+        measure=ca.Function("pam_linear_measure", [x, d], [ca.vertcat(x[0], x[2])], ["x", "d"], ["z"]),
+        sample_period=p.sample_period, state_names=names, sensor_names=("y", "pressure"))
+
+
+def static_compensation(p: PamJointParams, theta_deg: float) -> float:
+    """What :func:`linear_model` leaves out of the static balance at angle θ (bar):
+    ``Δp_cons(θ) − Δp_cons'(0) θ``, eq. (2) minus its slope at 0."""
+    slope = (p.passive_stiffness + p.payload_kg * GRAVITY * p.lever_m) * DEG / p.torque_per_bar
+    return float(constraint_pressure(p, theta_deg)) - slope * theta_deg
+
+
 @dataclass
 class PamJoint(ParametrisedPlant):
     """Simulated antagonistic PAM joint; input: commanded Δp (bar); output: angle (deg)."""
@@ -207,8 +244,7 @@ class PamJoint(ParametrisedPlant):
         return self._measure()
 
     def _creep(self, t, xp=np):
-        p = self.params
-        return -p.creep_torque * (1.0 - xp.exp(-t / p.creep_time))
+        return _creep(self.params, t, xp)
 
     def step(self, u: float) -> Measurement:
         """Apply the commanded pressure difference ``u`` (bar) for one sample."""
@@ -230,23 +266,7 @@ class PamJoint(ParametrisedPlant):
         the exact Maxwell-slip update (clips, not smoothed). Built once per plant; evaluating
         it is about 100 times faster than the same arithmetic in NumPy scalars."""
         if getattr(self, "_sample", None) is None:
-            p = self.params
-            ms = p.hysteresis
-            x = ca.SX.sym("x", 4)
-            hys = ca.SX.sym("hys", 1 + ms.n_elements)
-            t0, dp_cmd = ca.SX.sym("t"), ca.SX.sym("dp_cmd")
-            h = p.sample_period / p.substeps
-            xk, last, forces, t = x, hys[0], [hys[1 + i] for i in range(ms.n_elements)], t0
-            for _ in range(p.substeps):
-                dp_hys = sum(forces)
-                xk = rk4(lambda x, t, dp_hys=dp_hys: ca.vertcat(*joint_rhs(p, x, dp_cmd, dp_hys, self._creep(t, ca),
-                                                                            xp=ca)), xk, h, t=t)
-                xk = ca.vertcat(xk[:3], ca.fmin(ca.fmax(xk[3], -p.pressure_slew), p.pressure_slew))
-                t = t + h
-                forces = [ca.fmin(ca.fmax(f + k * (xk[0] - last), -w), w) for f, k, w in zip(forces, ms.k, ms.w,
-                                                                                            strict=True)]
-                last = xk[0]
-            self._sample = ca.Function("pam_plant_sample", [x, hys, t0, dp_cmd], [xk, ca.vertcat(last, *forces)])
+            self._sample = _sample_function(self.params)
         return self._sample
 
     def _measure(self) -> Measurement:
@@ -265,3 +285,29 @@ class PamJoint(ParametrisedPlant):
 def perturbed_hysteresis(base: MaxwellSlip, k_scale: float, w_scale: float) -> MaxwellSlip:
     """Maxwell-slip model with stiffnesses and break-away levels scaled element-wise."""
     return replace(base, k=tuple(k * k_scale for k in base.k), w=tuple(w * w_scale for w in base.w))
+
+
+def _creep(p: PamJointParams, t, xp=np):
+    """Torque lost to muscle creep at time ``t`` (N m)."""
+    return -p.creep_torque * (1.0 - xp.exp(-t / p.creep_time))
+
+
+@functools.lru_cache(maxsize=64)
+def _sample_function(p: PamJointParams) -> ca.Function:
+    """:meth:`PamJoint._sample_function` for parameters ``p``, built once per process."""
+    ms = p.hysteresis
+    x = ca.SX.sym("x", 4)
+    hys = ca.SX.sym("hys", 1 + ms.n_elements)
+    t0, dp_cmd = ca.SX.sym("t"), ca.SX.sym("dp_cmd")
+    h = p.sample_period / p.substeps
+    xk, last, forces, t = x, hys[0], [hys[1 + i] for i in range(ms.n_elements)], t0
+    for _ in range(p.substeps):
+        dp_hys = sum(forces)
+        xk = rk4(lambda x, t, dp_hys=dp_hys: ca.vertcat(*joint_rhs(p, x, dp_cmd, dp_hys, _creep(p, t, ca),
+                                                                    xp=ca)), xk, h, t=t)
+        xk = ca.vertcat(xk[:3], ca.fmin(ca.fmax(xk[3], -p.pressure_slew), p.pressure_slew))
+        t = t + h
+        forces = [ca.fmin(ca.fmax(f + k * (xk[0] - last), -w), w) for f, k, w in zip(forces, ms.k, ms.w,
+                                                                                    strict=True)]
+        last = xk[0]
+    return ca.Function("pam_plant_sample", [x, hys, t0, dp_cmd], [xk, ca.vertcat(last, *forces)])

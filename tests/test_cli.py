@@ -25,7 +25,8 @@ def _csv(tmp_path, text, name="ref.csv"):
 @pytest.mark.parametrize("argv, needle", [
     (["run", "pam", "nosuch", "--controller", "nmpc"],
      "unknown scenario 'nosuch'; allowed: square-10, square-20, square-30, square-40, sine-30"),
-    (["run", "pam", "square-10", "--controller", "lqr"], "unknown controller 'lqr'; allowed: pi, pi-hc, nmpc"),
+    (["run", "pam", "square-10", "--controller", "lqr"],
+     "unknown controller 'lqr'; allowed: pi, pi-hc, inverse-lmpc, nmpc"),
     (["run", "nosuch", "square-10", "--controller", "pi"],
      "unknown bench 'nosuch'; allowed: pam, compliant, reluctance"),
     (["compare", "pam", "--controllers", "pi,lqr"], "unknown controller 'lqr'"),
@@ -120,8 +121,8 @@ def test_list_json(capsys):
     code, out, _ = _run(capsys, ["list", "--json"])
     assert code == 0
     info = json.loads(out)
-    assert info["benches"]["pam"]["controllers"] == ["pi", "pi-hc", "nmpc"]
-    assert info["benches"]["compliant"]["controllers"] == ["pid", "inverse-ff-pid", "nmpc"]
+    assert info["benches"]["pam"]["controllers"] == ["pi", "pi-hc", "inverse-lmpc", "nmpc"]
+    assert info["benches"]["compliant"]["controllers"] == ["pid", "inverse-ff-pid", "inverse-lmpc", "nmpc"]
     assert "ipopt" in info["solvers"]
 
 

@@ -65,10 +65,11 @@ def test_full_comparison_meets_the_issue(tmp_path):
     doc = json.loads(doc_path.read_text())
     validate_document(doc)
     runs = {(r["scenario"], r["controller"]): r for r in doc["runs"]}
-    assert len(runs) == 9
+    assert len(runs) == 12
     for scenario in BENCH.scenarios:
-        rmse = {c: runs[(scenario, c)]["metrics"]["rmse"] for c in ("pid", "inverse-ff-pid", "nmpc")}
+        rmse = {c: runs[(scenario, c)]["metrics"]["rmse"] for c in ("pid", "inverse-ff-pid", "inverse-lmpc", "nmpc")}
         assert rmse["nmpc"] <= 0.5 * rmse["inverse-ff-pid"] < rmse["pid"], (scenario, rmse)
+        assert rmse["nmpc"] <= 0.8 * rmse["inverse-lmpc"], (scenario, rmse)  # at least 20 % better
         assert runs[(scenario, "inverse-ff-pid")]["paper"]["rmse"] > 0
         solver = runs[(scenario, "nmpc")]["solver"]
         assert solver["failures"] == 0 and solver["fallbacks"] == 0, (scenario, solver)

@@ -85,8 +85,11 @@ def test_full_comparison_orderings_and_nmpc():
     assert ss["bic"] <= 3 * PAPER_TABLE_2["bic"][1]
     for scenario in ("single-sine", "composite"):
         assert rmse[scenario, "nmpc"] <= 0.5 * rmse[scenario, "bic"]
+    papers = [c for c in BENCH.controllers if c != "inverse-lmpc"]
     for scenario in BENCH.scenarios:
-        assert rmse[scenario, "nmpc"] == min(rmse[scenario, c] for c in BENCH.controllers), scenario
+        assert rmse[scenario, "nmpc"] == min(rmse[scenario, c] for c in papers), scenario
+        # the exact FCKP inverse + linear MPC tracks better than the NMPC here (docs/dea.md)
+        assert rmse[scenario, "inverse-lmpc"] < rmse[scenario, "nmpc"] < rmse[scenario, "linear-mpc"], scenario
 
 
 @pytest.mark.slow

@@ -27,11 +27,12 @@ def test_full_comparison_meets_the_issue(tmp_path, capsys):
     doc = json.loads(doc_path.read_text())
     validate_document(doc)
     runs = {(r["scenario"], r["controller"]): r for r in doc["runs"]}
-    assert len(runs) == 15
+    assert len(runs) == 20
     for scenario in BENCH.scenarios:
-        rmse = {c: runs[(scenario, c)]["metrics"]["rmse"] for c in ("pi", "pi-hc", "nmpc")}
+        rmse = {c: runs[(scenario, c)]["metrics"]["rmse"] for c in ("pi", "pi-hc", "inverse-lmpc", "nmpc")}
         assert rmse["nmpc"] <= 0.5 * rmse["pi-hc"], (scenario, rmse)
         assert rmse["pi-hc"] < rmse["pi"], (scenario, rmse)
+        assert rmse["nmpc"] < rmse["inverse-lmpc"] < rmse["pi-hc"], (scenario, rmse)
         solver = runs[(scenario, "nmpc")]["solver"]
         assert solver["failures"] == 0 and solver["fallbacks"] == 0, (scenario, solver)
         assert (tmp_path / "res" / f"{scenario}.png").is_file()

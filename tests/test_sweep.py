@@ -48,7 +48,7 @@ samples = 2
     ('bench = "pam"\nsamples = 3\n', "unknown key 'samples'; allowed: bench, scenarios"),
     ('bench = "nosuch"\n', "bench: unknown bench 'nosuch'; allowed: pam, compliant, reluctance, dea"),
     ('bench = "pam"\nscenarios = ["square-99"]\n', "unknown scenario 'square-99'; allowed: square-10"),
-    ('bench = "pam"\ncontrollers = ["lqr"]\n', "unknown controller 'lqr'; allowed: pi, pi-hc, nmpc"),
+    ('bench = "pam"\ncontrollers = ["lqr"]\n', "unknown controller 'lqr'; allowed: pi, pi-hc, inverse-lmpc, nmpc"),
     ('bench = "pam"\nseeds = [1, 1]\n', "seeds must be a non-empty list of distinct integers"),
     ('bench = "pam"\n[perturb]\n"plant.nosuch" = 0.1\n', "unknown perturb key 'plant.nosuch'; group plant has 22 keys"),
     ('bench = "pam"\n[perturb]\n"plant.substeps" = 0.1\n', "'plant.substeps' is not a real-valued parameter"),

@@ -13,7 +13,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from hystmpc.experiments.baselines import PidController, PidGains, inverse_feedforward_pid
+from hystmpc.experiments.baselines import InverseCompensation, PidController, PidGains, inverse_feedforward_pid
 from hystmpc.experiments.bench import MULTIPLE_SHOOTING, Bench, ControllerSpec
 from hystmpc.experiments.runner import Scenario
 from hystmpc.models.prediction import Smoothing
@@ -27,11 +27,13 @@ from hystmpc.mpc import (
     SolverSettings,
     StateObserver,
 )
+from hystmpc.mpc.linear_mpc import InverseLinearMpc, LinearMpcSettings
 from hystmpc.plants.compliant import (
     CompliantActuator,
     CompliantParams,
     initial_state,
     inverse_inputs,
+    linear_model,
     prediction_model,
 )
 
@@ -86,6 +88,26 @@ def build_nmpc(config: dict) -> NmpcController:
                           inverse=lambda est, refs: inverse_inputs(model, est.x, est.d, refs), jump_threshold=0.2)
 
 
+def build_inverse_lmpc(config: dict) -> InverseLinearMpc:
+    """``inverse-lmpc``: the inverse power-function model in series with the motor command
+    (its memory follows the measured motor angle), and a linear MPC on the servo in torque
+    units, with the NMPC's horizon, bounds, preview and output disturbance."""
+    model: CompliantParams = config["model"]
+    geometry = model.geometry
+    compensation = InverseCompensation(
+        model.hysteresis, sensors=lambda m, comp: [comp.output, m.y],
+        driven_by=lambda m: geometry.s(m.sensors["angle"]), input_of=lambda s: float(geometry.theta(s)),
+        hysteresis_input_of=geometry.s)
+    r_tau = model.torque_resolution**2 / 12 + model.torque_noise**2
+    D = model.command_delay
+    bounds = InputBounds(-model.angle_limit, model.angle_limit, model.rate_limit * model.sample_period)
+    return InverseLinearMpc(
+        linear_model(model), compensation, bounds, config["lmpc"],
+        process_noise=[1e-8, 1e-2] + [1e-14] * D + [1e-6], measurement_noise=[1e-6, r_tau],
+        initial_state=lambda z: np.concatenate(([z[0], 0.0], np.full(D, z[0]))),
+        initial_covariance=[1e-6, 1e-4] + [1e-14] * D + [1e-2])
+
+
 def _sine(amplitude: float) -> Scenario:
     def reference(t):
         return amplitude * np.sin(0.2 * np.pi * np.asarray(t, float))
@@ -98,7 +120,8 @@ def _defaults() -> dict:
             "nmpc": NmpcSettings(horizon=10, q_output=1e4, r_rate=10.0), "smoothing": Smoothing(eps=2e-4),
             # rti-c with 3 Gauss-Newton steps per sample: within 2 % of IPOPT's RMSE on every
             # scenario (1 step: +12 % on sine-0.5), at a fifth of its time (docs/realtime.md)
-            "solver": SolverSettings(ipopt=warm, sqp=warm, rti=RtiSettings(iterations=3))}
+            "solver": SolverSettings(ipopt=warm, sqp=warm, rti=RtiSettings(iterations=3)),
+            "lmpc": LinearMpcSettings(horizon=10, q_output=1e4, r_rate=30.0)}
 
 
 BENCH = Bench(
@@ -115,6 +138,8 @@ BENCH = Bench(
                               lambda c: build_pid(c, feedforward=False), ("model", "pid")),
         "inverse-ff-pid": ControllerSpec("inverse-ff-pid", "inverse power-function model + PID (Fig. 14)",
                                          lambda c: build_pid(c, feedforward=True), ("model", "pid")),
+        "inverse-lmpc": ControllerSpec("inverse-lmpc", "inverse power-function model + linear MPC (OSQP)",
+                                       build_inverse_lmpc, ("model", "lmpc")),
         "nmpc": ControllerSpec("nmpc", "torque NMPC, smoothed power-function model, inverse warm start",
                                build_nmpc, ("model", "nmpc", "smoothing", "solver")),
     },

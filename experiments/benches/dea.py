@@ -13,6 +13,9 @@ Controllers (all see the laser displacement; none knows the plant's true paramet
 * ``linear-mpc``: OSQP on a linear model linearised at the first reference, Ts 0.01 s,
   prediction 15, control horizon 5, output weight 0.13, rate weight 0.75, u ∈ [0, 10] V,
   with an input-disturbance Kalman filter for offset-free tracking;
+* ``inverse-lmpc``: the inverse FCKP model in series with the voltage (its memory follows
+  the applied voltages) and a linear MPC on the mechanics linearised at 1.5 mm, with the
+  NMPC's horizon, bounds, preview and input disturbance (creep and mismatch land in it);
 * ``nmpc``: single-shooting NMPC on the smooth FCKP model with the GL sum split into
   in-horizon terms and a history term computed outside the NLP (design/nmpc.md).
 
@@ -26,11 +29,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from hystmpc.experiments.baselines import PidController, PidGains
+from hystmpc.experiments.baselines import InverseCompensation, PidController, PidGains
 from hystmpc.experiments.bench import SINGLE_SHOOTING, Bench, ControllerSpec
 from hystmpc.experiments.benches.dea_backstepping import Backstepping, BicSettings
 from hystmpc.experiments.benches.dea_linear_mpc import LinearMpc, LinearMpcSettings
 from hystmpc.experiments.runner import Scenario
+from hystmpc.models.fckp import Fckp
 from hystmpc.models.prediction import Smoothing
 from hystmpc.mpc import (
     DisturbanceEKF,
@@ -40,7 +44,9 @@ from hystmpc.mpc import (
     NmpcSettings,
     SolverSettings,
 )
-from hystmpc.plants.dea import DeaActuator, DeaParams, prediction_model
+from hystmpc.mpc.linear_mpc import InverseLinearMpc
+from hystmpc.mpc.linear_mpc import LinearMpcSettings as InverseLmpcSettings
+from hystmpc.plants.dea import DeaActuator, DeaParams, linear_model, prediction_model
 
 NOMINAL = DeaParams()
 """What the controllers believe (the FCKP parameters as identified, our mechanics)."""
@@ -101,6 +107,16 @@ def build_nmpc(config: dict) -> NmpcController:
     return NmpcController(pm, InputBounds(0.0, model.fckp.u_max), config["nmpc"], config["solver"], observer=observer)
 
 
+def build_inverse_lmpc(config: dict) -> InverseLinearMpc:
+    """``inverse-lmpc``: inverse FCKP in series with the voltage, linear MPC on the mechanics."""
+    model: DeaParams = config["model"]
+    compensation = InverseCompensation(Fckp(model.fckp), sensors=lambda m, comp: [m.y])
+    return InverseLinearMpc(
+        linear_model(model), compensation, InputBounds(0.0, model.fckp.u_max), config["lmpc"],
+        process_noise=[1e-10, 1e-4, 1e-6], measurement_noise=[max(model.noise, 1e-6) ** 2],
+        initial_state=lambda z: np.array([z[0], 0.0]), initial_covariance=[1e-6, 1e-4, 1e-2])
+
+
 def _with_approach(name: str, description: str, core) -> Scenario:
     """The paper's 40 s reference ``core(t)`` after a 2 s raised-cosine approach from 0."""
     start = float(core(np.zeros(1))[0])
@@ -139,6 +155,7 @@ def _defaults() -> dict:
     return {"plant": PLANT, "model": NOMINAL, "memory": MemorySettings(),
             "pid": PidGains(kp=0.8, ki=1.67, kd=0.01), "bic": BicSettings(),
             "linear_mpc": LinearMpcSettings(),
+            "lmpc": InverseLmpcSettings(horizon=15, q_output=1e4, r_rate=1.0),
             "nmpc": NmpcSettings(horizon=15, q_output=1e4, r_rate=1.0, solver="gn"),
             "smoothing": Smoothing(eps=1e-3, direction_eps=1e-4),
             "solver": SolverSettings().uniform(max_iter=60, tol=1e-3)}
@@ -158,6 +175,8 @@ def _controllers() -> dict[str, ControllerSpec]:
                               backstepping(True), ("model", "bic", "memory")),
         "linear-mpc": ControllerSpec("linear-mpc", "linear MPC (OSQP), Np 15, Nc 5, Section 5.2 weights",
                                      lambda c: LinearMpc(c["linear_mpc"], c["model"]), ("model", "linear_mpc")),
+        "inverse-lmpc": ControllerSpec("inverse-lmpc", "inverse FCKP model + linear MPC (OSQP)", build_inverse_lmpc,
+                                       ("model", "lmpc")),
         "nmpc": ControllerSpec("nmpc", "NMPC on the smooth FCKP model, GL history as parameters", build_nmpc,
                                ("model", "memory", "nmpc", "smoothing", "solver")),
     }

@@ -13,17 +13,20 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from hystmpc.experiments.baselines import HysteresisCompensation, PidController, PidGains
+from hystmpc.experiments.baselines import AdditiveCompensation, HysteresisCompensation, PidController, PidGains
 from hystmpc.experiments.bench import MULTIPLE_SHOOTING, Bench, ControllerSpec
 from hystmpc.experiments.runner import Scenario
 from hystmpc.models.prediction import Smoothing
 from hystmpc.mpc import DisturbanceEKF, InputBounds, NmpcController, NmpcSettings, SolverSettings, StateObserver
+from hystmpc.mpc.linear_mpc import InverseLinearMpc, LinearMpcSettings
 from hystmpc.plants.pam_joint import (
     PamJoint,
     PamJointParams,
     inverse_inputs,
+    linear_model,
     perturbed_hysteresis,
     prediction_model,
+    static_compensation,
 )
 
 NOMINAL = PamJointParams()
@@ -95,6 +98,31 @@ def build_nmpc(config: dict) -> NmpcController:
                           inverse=lambda est, refs: inverse_inputs(model, est.x, est.d, refs), jump_threshold=1.0)
 
 
+def build_inverse_lmpc(config: dict) -> InverseLinearMpc:
+    """``inverse-lmpc``: the Maxwell-slip compensation of ``pi-hc`` plus the static balance
+    (eq. (2)) beyond its slope at 0, both from the measured angle, and a linear MPC on the
+    joint linearised at 0 with the NMPC's horizon, bounds and preview, and a Kalman filter
+    with the NMPC's disturbance model (its own noise, group ``lmpc_estimator``)."""
+    model: PamJointParams = config["model"]
+    hysteresis = HysteresisCompensation(model.hysteresis)
+
+    def offset(measurement):
+        return hysteresis(measurement, None) + static_compensation(model, measurement.y)
+
+    offset.reset = hysteresis.reset
+    compensation = AdditiveCompensation(offset, lambda m, c: [m.y, m.sensors["pressure"] - c])
+    D = model.delay_samples
+    noise: EstimatorNoise = config["lmpc_estimator"]
+    quantum = 360.0 / model.encoder_counts
+    bounds = InputBounds(-model.dp_limit, model.dp_limit, model.pressure_slew * model.sample_period)
+    return InverseLinearMpc(
+        linear_model(model), compensation, bounds, config["lmpc"],
+        process_noise=[1e-6, noise.velocity, 1e-5, 1e-2] + [1e-12] * D + [noise.disturbance],
+        measurement_noise=[quantum**2 / 12 + 1e-6, model.pressure_noise_bar**2 + 1e-6],
+        initial_state=lambda z: np.concatenate(([z[0], 0.0, z[1], 0.0], np.zeros(D))),
+        initial_covariance=[1e-3, 1.0, 1e-3, 1.0] + [1e-12] * D + [0.1])
+
+
 def _square(amplitude: float) -> Scenario:
     def reference(t):
         t = np.asarray(t, float)
@@ -112,7 +140,9 @@ def _sine(amplitude: float) -> Scenario:
 def _defaults() -> dict:
     # PI gains (bar/deg, bar/(deg s)) from a grid search; see docs/pam.md.
     return {"plant": PLANT, "model": NOMINAL, "pi": PidGains(kp=0.08, ki=0.4), "nmpc": NmpcSettings(r_rate=10.0),
-            "smoothing": Smoothing(eps=1e-3), "solver": SolverSettings(), "estimator": EstimatorNoise()}
+            "smoothing": Smoothing(eps=1e-3), "solver": SolverSettings(), "estimator": EstimatorNoise(),
+            "lmpc": LinearMpcSettings(horizon=20, r_rate=30.0),
+            "lmpc_estimator": EstimatorNoise(velocity=1.0, disturbance=1e-2)}
 
 
 NMPC_GROUPS = ("model", "nmpc", "smoothing", "solver", "estimator")
@@ -132,6 +162,8 @@ BENCH = Bench(
                              lambda c: build_pi(c, compensate=False), ("model", "pi")),
         "pi-hc": ControllerSpec("pi-hc", "PI + Maxwell-slip hysteresis compensation (Fig. 1)",
                                 lambda c: build_pi(c, compensate=True), ("model", "pi")),
+        "inverse-lmpc": ControllerSpec("inverse-lmpc", "Maxwell-slip and static compensation + linear MPC (OSQP)",
+                                       build_inverse_lmpc, ("model", "lmpc", "lmpc_estimator")),
         "nmpc": ControllerSpec("nmpc", "offset-free NMPC, smoothed Maxwell-slip model, inverse warm start",
                                build_nmpc, NMPC_GROUPS),
     },

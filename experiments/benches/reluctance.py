@@ -10,6 +10,9 @@ plant's true parameters.
   the amplifier's slew limit;
 
 Both inverses command the force wanted at the next sample, when their current takes effect.
+* ``inverse-lmpc``: the inverse of eq. (12a) in series with the current (its memory follows
+  the currents sent), and a linear MPC on what remains: the force one sample after the
+  command, with the NMPC's horizon, current bounds, slew limit and preview;
 * ``nmpc``: currents over a horizon within the current bounds and slew limit, predicting
   F = Lut⁻¹(H[i], g) (eq. (12b)) with the smooth H.
 """
@@ -21,12 +24,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hystmpc.experiments.baselines import InverseCompensation
 from hystmpc.experiments.bench import MULTIPLE_SHOOTING, Bench, ControllerSpec
 from hystmpc.experiments.runner import Scenario
 from hystmpc.experiments.signals import smooth_path, staircase
 from hystmpc.models.prediction import Smoothing
 from hystmpc.models.reluctance import ReluctanceModel, fit_reluctance_model, prediction_model
 from hystmpc.mpc import InputBounds, NmpcController, NmpcSettings, SolverSettings
+from hystmpc.mpc.linear_mpc import InverseLinearMpc, LinearMpcSettings, one_sample_delay
 from hystmpc.plants.reluctance import C_CORE, ReluctanceActuator, ReluctanceParams, major_loop_measurement
 
 CORES = ("E", "C")
@@ -188,7 +193,7 @@ class HystInverse:
 
 
 def build(kind: str, config: dict):
-    """``poly-inverse``, ``hyst-inverse`` or ``nmpc`` on the identified model of the configured rig."""
+    """``poly-inverse``, ``hyst-inverse``, ``lmpc`` or ``nmpc`` on the identified model of the configured rig."""
     plant, gap, _ = rig(config)
     model = identified_model(config)
     slew = plant.slew_limit * plant.sample_period
@@ -196,6 +201,14 @@ def build(kind: str, config: dict):
         return PolyInverse(model, gap, plant.current_limit)
     if kind == "hyst":
         return HystInverse(model, gap, plant.current_limit, slew)
+    if kind == "lmpc":
+        compensation = InverseCompensation(
+            model.operator(gap), sensors=lambda m, comp: [],
+            virtual_of=lambda x: float(model.force_of_x(x, gap)),
+            hysteresis_output_of=lambda f: float(model.x_of_force(max(f, 0.0), gap)))
+        return InverseLinearMpc(one_sample_delay(plant.sample_period), compensation,
+                                InputBounds(0.0, plant.current_limit, slew), config["lmpc"], process_noise=[0.0],
+                                measurement_noise=[], initial_state=lambda z: np.zeros(1), initial_covariance=[0.0])
     smoothing: Smoothing = config["smoothing"]
     pm = prediction_model(model, gap, plant.sample_period, smoothing.eps, smoothing.direction)
     # feed-forward: the exact H, run on the currents sent, re-anchors the smooth prediction every sample
@@ -221,6 +234,7 @@ def _defaults() -> dict:
     return {"rig": RigSettings(), "ecore": ReluctanceParams(), "ccore": C_CORE,
             "identification": IdentificationSettings(),
             "nmpc": NmpcSettings(horizon=16, q_output=1.0, r_rate=1.0, solver="sqp"),
+            "lmpc": LinearMpcSettings(horizon=16, q_output=1.0, r_rate=1e-6),
             "smoothing": Smoothing(eps=1e-5), "solver": SolverSettings().uniform(max_iter=50)}
 
 
@@ -241,6 +255,8 @@ BENCH = Bench(
                                        functools.partial(build, "poly"), IDENTIFIED),
         "hyst-inverse": ControllerSpec("hyst-inverse", "IH[Lut(F, g)], eq. (12a), Fig. 10",
                                        functools.partial(build, "hyst"), IDENTIFIED),
+        "inverse-lmpc": ControllerSpec("inverse-lmpc", "IH[Lut(F, g)] + linear MPC (OSQP) with the slew limit",
+                                       functools.partial(build, "lmpc"), (*IDENTIFIED, "lmpc")),
         "nmpc": ControllerSpec("nmpc", "feed-forward NMPC: currents over a horizon, slew limit, F = Lut⁻¹(H[i])",
                                functools.partial(build, "nmpc"), (*IDENTIFIED, "nmpc", "smoothing", "solver")),
     },

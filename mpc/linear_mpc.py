@@ -1,0 +1,252 @@
+"""Inverse compensation plus linear MPC: the strong conventional alternative to the NMPC.
+
+A :class:`Compensation` (an actuator's inverse hysteresis model) turns a *virtual* input
+``v`` into the actuator input ``u``, so that what remains between ``v`` and the output is
+nearly linear. :class:`InverseLinearMpc` controls that remainder with a linear MPC: a
+condensed QP over the same horizon, input and rate bounds and reference preview as the
+NMPC, solved by OSQP, and a Kalman filter with the same integrating disturbance as the
+NMPC's estimator (offset-free tracking). The remainder is given as a
+:class:`~hystmpc.models.prediction.PredictionModel` with ``v`` as its input; it is
+linearised once at the origin (exact when it is linear).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Protocol
+
+import casadi as ca
+import numpy as np
+
+from hystmpc.models.prediction import PredictionModel
+from hystmpc.mpc.settings import InputBounds
+
+
+class Compensation(Protocol):
+    """An inverse model between the linear MPC's virtual input ``v`` and the actuator input ``u``."""
+
+    def reset(self) -> None:
+        """Forget the model's memory."""
+
+    def update(self, measurement) -> None:
+        """See this sample's measurement (before :meth:`to_input` / :meth:`to_virtual`)."""
+
+    def to_input(self, v: float) -> float:
+        """The actuator input that gives the virtual input ``v`` now."""
+
+    def to_virtual(self, u: float) -> float:
+        """The virtual input that the actuator input ``u`` gives now (monotone in ``u``)."""
+
+    def applied(self, u: float) -> None:
+        """The input actually sent this sample (input-driven memories follow it)."""
+
+    def sensors(self, measurement) -> np.ndarray:
+        """The linear model's sensor vector for this measurement."""
+
+
+@dataclass(frozen=True)
+class LinearMpcSettings:
+    """The linear MPC of ``inverse-lmpc`` (``--set lmpc.KEY=VALUE``)."""
+
+    horizon: int = 20
+    """Prediction (and control) horizon N in samples: the NMPC's, for a fair comparison."""
+    q_output: float = 1.0
+    """Weight on the squared tracking error of each predicted output."""
+    r_rate: float = 0.3
+    """Weight on the squared change of the virtual input per sample."""
+
+    def __post_init__(self):
+        if self.horizon < 2:
+            raise ValueError(f"horizon must be >= 2, got {self.horizon}")
+        if not (np.isfinite(self.q_output) and self.q_output > 0):
+            raise ValueError(f"q_output must be finite and > 0, got {self.q_output}")
+        if not (np.isfinite(self.r_rate) and self.r_rate >= 0):
+            raise ValueError(f"r_rate must be finite and >= 0, got {self.r_rate}")
+
+
+def linearise(model: PredictionModel) -> dict[str, np.ndarray]:
+    """``x+ = A x + B v + Bd d + f0``, ``y = Cy x + Dy d + y0``, ``z = Cz x + Dz d + z0`` at the origin."""
+    x, u, d = ca.SX.sym("x", model.nx), ca.SX.sym("u", model.nu), ca.SX.sym("d", model.nd)
+    nxt, y, z = model.step(x, u, d), model.output(x, d), model.measure(x, d)
+    parts = ca.Function("linearised", [x, u, d],
+                        [ca.jacobian(nxt, x), ca.jacobian(nxt, u), ca.jacobian(nxt, d), nxt,
+                         ca.jacobian(y, x), ca.jacobian(y, d), y, ca.jacobian(z, x), ca.jacobian(z, d), z])
+    values = [np.asarray(v, float) for v in parts(np.zeros(model.nx), np.zeros(model.nu), np.zeros(model.nd))]
+    names = ("A", "B", "Bd", "f0", "Cy", "Dy", "y0", "Cz", "Dz", "z0")
+    out = dict(zip(names, values, strict=True))
+    out["f0"], out["y0"], out["z0"] = out["f0"].ravel(), out["y0"].ravel(), out["z0"].ravel()
+    return out
+
+
+def one_sample_delay(sample_period: float) -> PredictionModel:
+    """The remainder of a feed-forward actuator whose inverse is exact and static: the output
+    is the virtual input one sample later; no sensors, no disturbance."""
+    x, v, d = ca.SX.sym("x", 1), ca.SX.sym("v"), ca.SX.sym("d", 0)
+    return PredictionModel(
+        step=ca.Function("delay_step", [x, v, d], [v], ["x", "u", "d"], ["x_next"]),
+        output=ca.Function("delay_output", [x, d], [x], ["x", "d"], ["y"]),
+        measure=ca.Function("delay_measure", [x, d], [ca.SX(0, 1)], ["x", "d"], ["z"]),
+        sample_period=sample_period, state_names=("output",), sensor_names=())
+
+
+class InverseLinearMpc:
+    """Inverse compensation + offset-free linear MPC (OSQP, condensed onto the virtual inputs).
+
+    Each sample: the compensation sees the measurement; the Kalman filter's time update
+    with the last virtual input and its measurement update; the virtual bounds (the
+    actuator's bounds and rate, through the compensation, held over the horizon); the QP
+    over ``v_0..v_{N−1}``; ``u = to_input(v_0)``, kept inside the bounds. A failed QP is
+    counted, and the previous plan's next virtual input is used (or the last one held).
+
+    Parameters
+    ----------
+    model : PredictionModel
+        The linear remainder, input ``v``; its disturbance ``d`` is estimated.
+    compensation : Compensation
+        The inverse model between ``v`` and ``u``.
+    bounds : InputBounds
+        The actuator's input bounds and rate.
+    settings : LinearMpcSettings
+        Horizon and weights.
+    process_noise, measurement_noise : array_like
+        Diagonals of the Kalman filter's covariances (``[x; d]``, sensors).
+    initial_state : callable
+        ``z -> x0`` from the first sensor vector.
+    initial_covariance : array_like
+        Diagonal of the initial covariance of ``[x; d]``.
+    """
+
+    def __init__(self, model: PredictionModel, compensation: Compensation, bounds: InputBounds,
+                 settings: LinearMpcSettings, process_noise, measurement_noise, initial_state,
+                 initial_covariance):
+        import osqp
+        from scipy import sparse
+
+        if model.nu != 1:
+            raise ValueError(f"the linear MPC takes one virtual input, the model has {model.nu}")
+        self.model, self.compensation, self.bounds, self.settings = model, compensation, bounds, settings
+        self.sensor_names = model.sensor_names
+        self._initial_state, self._p0 = initial_state, np.diag(np.asarray(initial_covariance, float))
+        lin = linearise(model)
+        nx, nd, N = model.nx, model.nd, settings.horizon
+        A = np.block([[lin["A"], lin["Bd"]], [np.zeros((nd, nx)), np.eye(nd)]])
+        B = np.vstack((lin["B"], np.zeros((nd, 1)))).ravel()
+        f = np.concatenate((lin["f0"], np.zeros(nd)))
+        Cy = np.hstack((lin["Cy"], lin["Dy"])).ravel()
+        # Kalman filter on [x; d] (d+ = d): the NMPC's disturbance model, exact on a linear model
+        self._kalman = {"A": A, "B": B, "f": f, "C": np.hstack((lin["Cz"], lin["Dz"])).reshape(model.nz, nx + nd),
+                        "z0": lin["z0"], "Q": np.diag(np.asarray(process_noise, float)),
+                        "R": np.diag(np.asarray(measurement_noise, float)).reshape(model.nz, model.nz),
+                        "Cy": Cy, "y0": float(lin["y0"][0])}
+        if self._kalman["Q"].shape != (nx + nd, nx + nd):
+            raise ValueError(f"process_noise needs {nx + nd} entries, got {len(process_noise)}")
+        # y_{k+j} = Cy (A^j z + Σ_{i<j} A^{j−1−i} (B v_i + f)) + y0, j = 1..N
+        self._Phi = np.empty((N, nx + nd))
+        self._G = np.zeros((N, N))
+        self._offset = np.empty(N)
+        power = np.eye(nx + nd)
+        drift = np.zeros(nx + nd)
+        markov = []
+        for j in range(N):
+            markov.append(Cy @ power @ B)
+            drift = A @ drift + f
+            power = A @ power
+            self._Phi[j] = Cy @ power
+            self._offset[j] = Cy @ drift + lin["y0"][0]
+        for j in range(N):
+            self._G[j, : j + 1] = markov[j::-1]
+        self._D = np.eye(N) - np.eye(N, k=-1)  # Δv_j = v_j − v_{j−1}
+        q, r = settings.q_output, settings.r_rate
+        P = 2 * (q * self._G.T @ self._G + r * self._D.T @ self._D)
+        self._qp = osqp.OSQP()
+        self._qp.setup(P=sparse.csc_matrix(np.triu(P)), q=np.zeros(N),
+                       A=sparse.csc_matrix(np.vstack((np.eye(N), self._D))), l=np.full(2 * N, -1e30),
+                       u=np.full(2 * N, 1e30), verbose=False, warm_starting=True, eps_abs=1e-7, eps_rel=1e-7,
+                       max_iter=10000, polishing=False)
+        self.reset()
+
+    @property
+    def horizon(self) -> int:
+        """Reference preview in samples (the horizon)."""
+        return self.settings.horizon
+
+    def reset(self) -> None:
+        """Forget estimate, plan, compensation memory and counters."""
+        self.compensation.reset()
+        self._started = False
+        self._u_last = 0.0
+        self._v_last = 0.0
+        self._plan = None
+        self.failures = 0
+        self.solve_times: list[float] = []
+        self.predicted_output = float("nan")
+
+    def _restart(self, z) -> None:
+        self._z = np.concatenate((np.asarray(self._initial_state(z), float), np.zeros(self.model.nd)))
+        self._P = self._p0.copy()
+
+    def step(self, measurement, ref_window) -> float:
+        """One sample: a measurement and the references ``r_k..r_{k+N}`` in, the input out."""
+        N = self.horizon
+        ref = np.asarray(ref_window, float).ravel()[1: N + 1]
+        self.compensation.update(measurement)
+        z = np.asarray(self.compensation.sensors(measurement), float)
+        kf = self._kalman
+        if self._started:
+            self._z = kf["A"] @ self._z + kf["B"] * self._v_last + kf["f"]
+            self._P = kf["A"] @ self._P @ kf["A"].T + kf["Q"]
+        else:
+            self._restart(z)
+        self.predicted_output = float(kf["Cy"] @ self._z + kf["y0"])
+        if self.model.nz:  # a feed-forward remainder (no sensors) only predicts
+            C = kf["C"]
+            gain = np.linalg.solve(C @ self._P @ C.T + kf["R"], C @ self._P).T
+            self._z = self._z + gain @ (z - C @ self._z - kf["z0"])
+            joseph = np.eye(len(self._z)) - gain @ C
+            self._P = joseph @ self._P @ joseph.T + gain @ kf["R"] @ gain.T
+        if not np.all(np.isfinite(self._z)):
+            self._restart(z)
+        state = self._z
+        b, s = self.bounds, self.settings
+        to_v = self.compensation.to_virtual
+        u_prev = self._u_last if self._started else 0.0
+        v_prev = to_v(u_prev)
+        v_low, v_high = sorted((to_v(b.lower), to_v(b.upper)))
+        rate_low, rate_high = -np.inf, np.inf
+        if np.isfinite(b.rate):
+            steps = (to_v(max(u_prev - b.rate, b.lower)) - v_prev, to_v(min(u_prev + b.rate, b.upper)) - v_prev)
+            rate_low, rate_high = -max(-min(steps), 0.0), max(max(steps), 0.0)
+        free = self._Phi @ state + self._offset
+        e0 = np.zeros(N)
+        e0[0] = v_prev
+        grad = 2 * (s.q_output * self._G.T @ (free - ref) - s.r_rate * self._D.T @ e0)
+        lower = np.concatenate((np.full(N, v_low), np.full(N, rate_low)))
+        upper = np.concatenate((np.full(N, v_high), np.full(N, rate_high)))
+        lower[N] += v_prev
+        upper[N] += v_prev
+        lower, upper = np.maximum(lower, -1e30), np.minimum(upper, 1e30)
+        start = time.perf_counter()
+        self._qp.update(q=grad, l=lower, u=upper)
+        result = self._qp.solve(raise_error=False)
+        self.solve_times.append(time.perf_counter() - start)
+        if result.info.status_val in (1, 2) and np.all(np.isfinite(result.x)):
+            v = float(result.x[0])
+            self._plan = result.x
+        else:
+            self.failures += 1
+            v = float(self._plan[1]) if self._plan is not None else v_prev
+            self._plan = None
+        u = self.compensation.to_input(v)
+        if not np.isfinite(u):
+            u = u_prev
+        u = self.bounds.clip(u, u_prev if self._started else None)
+        self._v_last = to_v(u)
+        self.compensation.applied(u)
+        self._u_last = u
+        self._started = True
+        return u
+
+    def stats(self) -> dict:
+        """QP failures (each one a fallback)."""
+        return {"name": "osqp", "failures": self.failures, "fallbacks": self.failures}
