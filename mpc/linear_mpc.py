@@ -127,9 +127,14 @@ class InverseLinearMpc:
             raise ValueError(f"the linear MPC takes one virtual input, the model has {model.nu}")
         self.model, self.compensation, self.bounds, self.settings = model, compensation, bounds, settings
         self.sensor_names = model.sensor_names
+        nx, nd, N = model.nx, model.nd, settings.horizon
+        for name, values, length in (("process_noise", process_noise, nx + nd),
+                                     ("measurement_noise", measurement_noise, model.nz),
+                                     ("initial_covariance", initial_covariance, nx + nd)):
+            if np.size(values) != length:
+                raise ValueError(f"{name} needs {length} entries, got {np.size(values)}")
         self._initial_state, self._p0 = initial_state, np.diag(np.asarray(initial_covariance, float))
         lin = linearise(model)
-        nx, nd, N = model.nx, model.nd, settings.horizon
         A = np.block([[lin["A"], lin["Bd"]], [np.zeros((nd, nx)), np.eye(nd)]])
         B = np.vstack((lin["B"], np.zeros((nd, 1)))).ravel()
         f = np.concatenate((lin["f0"], np.zeros(nd)))
@@ -139,8 +144,6 @@ class InverseLinearMpc:
                         "z0": lin["z0"], "Q": np.diag(np.asarray(process_noise, float)),
                         "R": np.diag(np.asarray(measurement_noise, float)).reshape(model.nz, model.nz),
                         "Cy": Cy, "y0": float(lin["y0"][0])}
-        if self._kalman["Q"].shape != (nx + nd, nx + nd):
-            raise ValueError(f"process_noise needs {nx + nd} entries, got {len(process_noise)}")
         # y_{k+j} = Cy (A^j z + Σ_{i<j} A^{j−1−i} (B v_i + f)) + y0, j = 1..N
         self._Phi = np.empty((N, nx + nd))
         self._G = np.zeros((N, N))
