@@ -49,7 +49,12 @@ def step_metrics(t, reference, output, min_step: float) -> dict[str, float] | No
 
 OSCILLATION_THRESHOLD = 0.02
 """A swing of the output counts when it reverses by more than this share of the reference's
-span (or of the output's, for a constant reference)."""
+span (or of the output's, for a constant reference, but never less than
+:data:`NOISE_FLOOR` times the output's estimated noise)."""
+NOISE_FLOOR = 8.0
+"""With a constant reference, a swing must also exceed this many standard deviations of the
+output's noise (:func:`noise_level`): white noise swings by more than 8 σ between two
+samples about once in 10⁸, so a settled, noisy output does not count as oscillating."""
 OSCILLATING_CYCLES = 5.0
 """A run whose output swings this many cycles in one train, while the reference keeps its
 direction, is flagged as oscillating (a step response that rings for two or three periods
@@ -60,6 +65,17 @@ def reversals(signal, threshold: float) -> np.ndarray:
     """Indices where ``signal`` turns: it has moved back from its last extremum by more than
     ``threshold`` (a swing smaller than that, e.g. sensor noise, is not a turn)."""
     return _turns(signal, threshold)[0]
+
+
+def noise_level(signal) -> float:
+    """Standard deviation of the white noise on ``signal``, from its second differences
+    (robust: 1.4826 × their median absolute deviation, over √6); a smooth signal gives
+    about 0."""
+    x = np.asarray(signal, float)
+    if len(x) < 3:
+        return 0.0
+    second = np.diff(x, 2)
+    return float(1.4826 * np.median(np.abs(second - np.median(second))) / np.sqrt(6.0))
 
 
 def _turns(signal, threshold: float) -> tuple[np.ndarray, np.ndarray]:
@@ -86,12 +102,13 @@ def _turns(signal, threshold: float) -> tuple[np.ndarray, np.ndarray]:
 def oscillation_metrics(t, reference, output, threshold: float = OSCILLATION_THRESHOLD) -> dict[str, float]:
     """How much the output swings back and forth on its own, not following the reference.
 
-    The output's turns (:func:`reversals`, by more than ``threshold`` × the reference's span)
-    are grouped into trains: turns between the same two turns or jumps of the reference,
-    each at most twice as far from the previous turn as that one was from its own (a
-    rhythm). The first turn after a turn or jump of the reference, in its direction, is the
-    output following it and does not count. A step response that overshoots turns once; a
-    limit cycle turns twice per period for as long as it lasts.
+    The output's turns (:func:`reversals`, by more than ``threshold`` × the reference's span;
+    for a constant reference, × the output's span and above a noise floor) are grouped into
+    trains: turns between the same two turns or jumps of the reference, each at most twice
+    as far from the previous turn as that one was from its own (a rhythm). The first turn
+    after a turn or jump of the reference, in its direction, is the output following it and
+    does not count. A step response that overshoots turns once; a limit cycle turns twice
+    per period for as long as it lasts.
 
     Returns ``oscillation_cycles``, the longest train's cycles (turns / 2),
     ``oscillation_hz``, its frequency (0 below two turns), and ``oscillating``, 1.0 when
@@ -100,8 +117,10 @@ def oscillation_metrics(t, reference, output, threshold: float = OSCILLATION_THR
     t = np.asarray(t, float)
     r = np.asarray(reference, float)
     y = np.asarray(output, float)
-    span = float(np.ptp(r)) or float(np.ptp(y)) or 1.0
-    delta = threshold * span
+    if np.ptp(r) > 0:
+        delta = threshold * float(np.ptp(r))
+    else:
+        delta = max(threshold * (float(np.ptp(y)) or 1.0), NOISE_FLOOR * noise_level(y))
     turns, turn_directions = _turns(y, delta)
     ref_turns, ref_directions = _turns(r, delta)
     jumps = np.flatnonzero(np.abs(np.diff(r)) > delta) + 1

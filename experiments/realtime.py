@@ -10,6 +10,7 @@ in-process and with the compiled step and reports the largest difference in appl
 from __future__ import annotations
 
 import logging
+import shlex
 import shutil
 import subprocess
 import time
@@ -124,15 +125,16 @@ def _rti_config(bench: Bench, config: dict, solver: str) -> dict:
 
 
 def _compile(out: Path) -> None:
-    cc = c_compiler() or shutil.which("gcc")
+    gcc = shutil.which("gcc")
+    cc = c_compiler() or ([gcc] if gcc else None)
     if cc is None:
         raise RuntimeError("no C compiler (cc or gcc) on the PATH")
     size = (out / "rti_step.c").stat().st_size
     logging.getLogger("hystmpc").info(f"compiling rti_step.c ({size / 1e3:.0f} kB) and the replay program with "
-                                      f"{cc} {' '.join(COMPILE_FLAGS)} in {out}")
-    for cmd in (["make", f"CC={cc}", "-s"],) if shutil.which("make") else (
-            [cc, *COMPILE_FLAGS, "-fPIC", "-shared", "rti_step.c", "-o", "librti_step.so", "-lm"],
-            [cc, *COMPILE_FLAGS, "main.c", "rti_step.c", "-o", "rti_main", "-lm"]):
+                                      f"{' '.join(cc)} {' '.join(COMPILE_FLAGS)} in {out}")
+    for cmd in (["make", f"CC={shlex.join(cc)}", "-s"],) if shutil.which("make") else (
+            [*cc, *COMPILE_FLAGS, "-fPIC", "-shared", "rti_step.c", "-o", "librti_step.so", "-lm"],
+            [*cc, *COMPILE_FLAGS, "main.c", "rti_step.c", "-o", "rti_main", "-lm"]):
         done = subprocess.run(cmd, cwd=out, capture_output=True, text=True)
         if done.returncode != 0:
             raise RuntimeError(f"build failed ({' '.join(cmd)}): {done.stderr.strip()[:2000]}")

@@ -24,11 +24,30 @@ def version() -> str:
         return "0+unknown"
 
 
+ENVIRONMENT_PACKAGES = ("casadi", "numpy", "scipy", "osqp")
+"""Libraries whose version can move a closed loop's last digits (docs/realtime.md)."""
+
+
+def environment() -> dict[str, str]:
+    """What else made a result: Python, the numerical libraries' versions and the CPU
+    architecture. The same command can differ in its last digits across these."""
+    import platform
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as _version
+    out = {"python": platform.python_version(), "machine": platform.machine()}
+    for name in ENVIRONMENT_PACKAGES:
+        try:
+            out[name] = _version(name)
+        except PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
 def results_document(bench: str, runs: list[RunResult], command: list[str] | None = None) -> dict:
     """The full result document (``hystmpc.results/1``) for a list of runs on bench ``bench``."""
     doc = {"schema": SCHEMA, "bench": bench,
            "created": dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
-           "version": version(), "runs": [r.to_json() for r in runs]}
+           "version": version(), "environment": environment(), "runs": [r.to_json() for r in runs]}
     if command is not None:
         doc["command"] = command
     return json_safe(doc)

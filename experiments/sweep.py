@@ -622,7 +622,7 @@ def run_sweep(spec: SweepSpec, out: Path, workers: int | None = None, executor: 
         With ``resume``, also redo the runs recorded as errors.
     """
     from hystmpc.experiments.benches import get_bench
-    from hystmpc.experiments.report import version
+    from hystmpc.experiments.report import environment, version
 
     workers = workers or os.cpu_count() or 1
     if executor not in ("local", "dask"):
@@ -702,9 +702,9 @@ def run_sweep(spec: SweepSpec, out: Path, workers: int | None = None, executor: 
 
     records = read_records(records_dir, expected, out / "set-aside")
     summary = summarize(spec, records)
-    summary["run_info"] = {"version": version(), "executor": executor, "workers": workers,
-                           "scheduler": scheduler, "ran": len(pending), "skipped": len(tasks) - len(pending),
-                           "wall_s": wall}
+    summary["run_info"] = {"version": version(), "environment": environment(), "executor": executor,
+                           "workers": workers, "scheduler": scheduler, "ran": len(pending),
+                           "skipped": len(tasks) - len(pending), "wall_s": wall}
     from hystmpc.experiments.report import json_safe
     summary = json_safe(summary)
     (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")

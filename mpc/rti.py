@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import logging
 import os
+import shlex
 import shutil
 import subprocess
 import time
@@ -134,16 +135,19 @@ multiply-adds, so the compiled step rounds as the in-process one does on any CPU
 LOG = logging.getLogger("hystmpc")
 
 
-def c_compiler() -> str | None:
-    """The system C compiler (``CC`` or ``cc``) if there is one on the PATH, else None."""
-    return shutil.which(os.environ.get("CC", "cc"))
+def c_compiler() -> list[str] | None:
+    """The system C compiler as a command (``CC``, which may carry a launcher or options
+    such as ``ccache gcc``, or ``cc``) if its program is on the PATH, else None."""
+    words = shlex.split(os.environ.get("CC", "") or "cc")
+    program = shutil.which(words[0]) if words else None
+    return [program, *words[1:]] if program else None
 
 
 def compile_function(fun: ca.Function, out_dir: Path | None = None, flags=COMPILE_FLAGS) -> ca.Function:
     """Generate C99 for ``fun``, compile it with the system C compiler and load it back.
 
-    Builds are cached by the hash of the generated source and the flags, so the same
-    problem compiles once; a compilation says what it does on the ``hystmpc`` logger.
+    Builds are cached by the hash of the generated source, the compiler command and the
+    flags, so the same problem compiles once; a compilation says what it does on the ``hystmpc`` logger.
     Raises ``RuntimeError`` with the compiler's message on failure, and
     :class:`CompilerNotFound` when there is no compiler.
     """
@@ -152,11 +156,11 @@ def compile_function(fun: ca.Function, out_dir: Path | None = None, flags=COMPIL
     gen = ca.CodeGenerator(f"{name}.c", {"with_header": True})
     gen.add(fun)
     source = _accept_last_qp_iterate(gen.dump())
-    digest = hashlib.sha256((source + " ".join(flags)).encode()).hexdigest()[:16]
+    compiler = c_compiler()
+    digest = hashlib.sha256((source + " ".join([*(compiler or []), *flags])).encode()).hexdigest()[:16]
     build = out_dir / f"{name}_{digest}"
     library = build / f"{name}.so"
     if not library.exists():
-        compiler = c_compiler()
         if compiler is None:
             raise CompilerNotFound(f"no C compiler found (looked for {os.environ.get('CC', 'cc')!r} on the PATH)")
         build.mkdir(parents=True, exist_ok=True)
@@ -164,9 +168,9 @@ def compile_function(fun: ca.Function, out_dir: Path | None = None, flags=COMPIL
         # private names, then an atomic rename: sweep workers may build the same step at once
         private = f"{name}.{os.getpid()}"
         (build / f"{private}.c").write_text(source)
-        cmd = [compiler, *flags, "-fPIC", "-shared", f"{private}.c", "-o", f"{private}.so", "-lm"]
-        LOG.info(f"compiling {name} ({len(source) / 1e3:.0f} kB of C) with {' '.join(cmd[:1 + len(flags)])}; "
-                 f"once, cached in {build.parent}")
+        cmd = [*compiler, *flags, "-fPIC", "-shared", f"{private}.c", "-o", f"{private}.so", "-lm"]
+        command = " ".join(cmd[:len(compiler) + len(flags)])
+        LOG.info(f"compiling {name} ({len(source) / 1e3:.0f} kB of C) with {command}; once, cached in {build.parent}")
         start = time.perf_counter()
         done = subprocess.run(cmd, cwd=build, capture_output=True, text=True)
         if done.returncode != 0:

@@ -8,12 +8,13 @@ from hystmpc.experiments.config import allowed_keys, apply_overrides
 from hystmpc.experiments.metrics import (
     OSCILLATING_CYCLES,
     input_metrics,
+    noise_level,
     oscillation_metrics,
     reversals,
     step_metrics,
     tracking_metrics,
 )
-from hystmpc.experiments.report import SCHEMA, validate_document
+from hystmpc.experiments.report import SCHEMA, results_document, validate_document
 
 
 def test_tracking_metrics_closed_form():
@@ -63,6 +64,17 @@ def test_oscillation_flags_a_limit_cycle_and_not_a_damped_ring():
     assert oscillation_metrics(t, smooth, smooth)["oscillation_cycles"] == 0.0
 
 
+def test_noise_on_a_held_reference_is_not_an_oscillation_but_a_cycle_is():
+    t = 0.01 * np.arange(4000)
+    held = np.full_like(t, 1.0)
+    noisy = held + 5e-4 * np.random.default_rng(3).standard_normal(len(t))
+    assert noise_level(noisy) == pytest.approx(5e-4, rel=0.1)
+    assert oscillation_metrics(t, held, noisy)["oscillation_cycles"] < 1.0
+    cycle = noisy + 4e-3 * np.sin(2 * np.pi * 3.0 * t)  # 8 noise σ peak to peak: a real limit cycle
+    m = oscillation_metrics(t, held, cycle)
+    assert m["oscillating"] == 1.0 and m["oscillation_hz"] == pytest.approx(3.0, rel=0.05)
+
+
 def test_input_total_variation():
     assert input_metrics([0.0, 1.0, -1.0, -1.0, 2.0])["input_tv"] == pytest.approx(6.0)
 
@@ -104,3 +116,11 @@ def test_validate_document_accepts_and_rejects():
     bad["schema"] = "other/1"
     with pytest.raises(ValueError, match="schema"):
         validate_document(bad)
+
+
+def test_result_documents_name_the_libraries_that_made_them():
+    import casadi
+
+    env = results_document("pam", [])["environment"]
+    assert env["casadi"] == casadi.__version__ and env["numpy"] == np.__version__
+    assert set(env) >= {"python", "machine", "scipy", "osqp"}

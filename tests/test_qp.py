@@ -7,7 +7,7 @@ import pytest
 import scipy.sparse as sp
 
 from hystmpc.mpc.qp import interior_point_qp
-from hystmpc.mpc.rti import compile_function
+from hystmpc.mpc.rti import CompilerNotFound, c_compiler, compile_function
 
 N = 10
 RATES = np.eye(N) - np.eye(N, k=-1)
@@ -77,6 +77,21 @@ def test_compiled_interior_point_qp_equals_the_in_process_one(tmp_path):
     compiled = compile_function(qp, tmp_path)
     H, g, l, u, _ = _random_problem(np.random.default_rng(3))
     assert np.max(np.abs(np.asarray(compiled(H, g, C, l, u)[0]) - np.asarray(qp(H, g, C, l, u)[0]))) <= 1e-12
+
+
+def test_cc_may_carry_a_launcher_and_is_part_of_the_cache_key(tmp_path, monkeypatch):
+    x = ca.SX.sym("x")
+    fun = ca.Function("twice", [x], [2 * x])
+    monkeypatch.setenv("CC", "env cc")  # as "ccache gcc" would: a launcher, then the compiler
+    assert c_compiler()[1:] == ["cc"]
+    assert float(compile_function(fun, tmp_path)(1.5)) == 3.0
+    monkeypatch.setenv("CC", "cc")
+    compile_function(fun, tmp_path)
+    assert len(list(tmp_path.glob("twice_*"))) == 2
+    monkeypatch.setenv("CC", "no-such-compiler-here")
+    assert c_compiler() is None
+    with pytest.raises(CompilerNotFound, match="no-such-compiler-here"):
+        compile_function(ca.Function("thrice", [x], [3 * x]), tmp_path)
 
 
 def test_qrqp_still_gets_a_small_rate_bounded_qp_wrong():
