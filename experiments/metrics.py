@@ -54,7 +54,8 @@ span (or of the output's, for a constant reference, but never less than
 NOISE_FLOOR = 8.0
 """With a constant reference, a swing must also exceed this many standard deviations of the
 output's noise (:func:`noise_level`): white noise swings by more than 8 σ between two
-samples about once in 10⁸, so a settled, noisy output does not count as oscillating."""
+samples about once in 10⁸, so a settled, noisy output does not count as oscillating. A
+quantised output (an encoder) must also swing by more than two steps (±1 count)."""
 OSCILLATING_CYCLES = 5.0
 """A run whose output swings this many cycles in one train, while the reference keeps its
 direction, is flagged as oscillating (a step response that rings for two or three periods
@@ -120,7 +121,9 @@ def oscillation_metrics(t, reference, output, threshold: float = OSCILLATION_THR
     if np.ptp(r) > 0:
         delta = threshold * float(np.ptp(r))
     else:
-        delta = max(threshold * (float(np.ptp(y)) or 1.0), NOISE_FLOOR * noise_level(y))
+        steps = np.abs(np.diff(y))
+        quantum = float(steps[steps > 0].min()) if np.any(steps > 0) else 0.0  # an encoder's count
+        delta = max(threshold * (float(np.ptp(y)) or 1.0), NOISE_FLOOR * noise_level(y), 2.5 * quantum)
     turns, turn_directions = _turns(y, delta)
     ref_turns, ref_directions = _turns(r, delta)
     jumps = np.flatnonzero(np.abs(np.diff(r)) > delta) + 1

@@ -138,8 +138,11 @@ LOG = logging.getLogger("hystmpc")
 def c_compiler() -> list[str] | None:
     """The system C compiler as a command (``CC``, which may carry a launcher or options
     such as ``ccache gcc``, or ``cc``) if its program is on the PATH, else None."""
-    words = shlex.split(os.environ.get("CC", "") or "cc")
-    program = shutil.which(words[0]) if words else None
+    try:
+        words = shlex.split(os.environ.get("CC", "")) or ["cc"]
+    except ValueError:  # an unbalanced quote: no command to run
+        return None
+    program = shutil.which(words[0])
     return [program, *words[1:]] if program else None
 
 

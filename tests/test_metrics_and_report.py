@@ -70,6 +70,8 @@ def test_noise_on_a_held_reference_is_not_an_oscillation_but_a_cycle_is():
     noisy = held + 5e-4 * np.random.default_rng(3).standard_normal(len(t))
     assert noise_level(noisy) == pytest.approx(5e-4, rel=0.1)
     assert oscillation_metrics(t, held, noisy)["oscillation_cycles"] < 1.0
+    encoder = np.round(noisy / 2e-3) * 2e-3  # mostly one count, now and then the next
+    assert oscillation_metrics(t, held, encoder)["oscillation_cycles"] < 1.0
     cycle = noisy + 4e-3 * np.sin(2 * np.pi * 3.0 * t)  # 8 noise σ peak to peak: a real limit cycle
     m = oscillation_metrics(t, held, cycle)
     assert m["oscillating"] == 1.0 and m["oscillation_hz"] == pytest.approx(3.0, rel=0.05)
