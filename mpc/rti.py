@@ -150,7 +150,8 @@ def compile_function(fun: ca.Function, out_dir: Path | None = None, flags=COMPIL
     """Generate C99 for ``fun``, compile it with the system C compiler and load it back.
 
     Builds are cached by the hash of the generated source, the compiler command and the
-    flags, so the same problem compiles once; a compilation says what it does on the ``hystmpc`` logger.
+    flags, so the same problem compiles once; a compilation says what it does on the
+    ``hystmpc`` logger.
     Raises ``RuntimeError`` with the compiler's message on failure, and
     :class:`CompilerNotFound` when there is no compiler.
     """

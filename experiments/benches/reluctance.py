@@ -233,7 +233,7 @@ def _scenarios() -> dict[str, Scenario]:
 def _defaults() -> dict:
     return {"rig": RigSettings(), "ecore": ReluctanceParams(), "ccore": C_CORE,
             "identification": IdentificationSettings(),
-            # rti-c, 3 steps: no failed solve (sqp failed 17-76 times per run) and every
+            # rti-c, 3 steps: no failed solve (sqp failed 15-76 times per run) and every
             # perturbed actuator's steps won; the price is reversals-1.75mm (docs/reluctance.md)
             "nmpc": NmpcSettings(horizon=16, q_output=1.0, r_rate=1.0, solver="rti-c"),
             "lmpc": LinearMpcSettings(horizon=16, q_output=1.0, r_rate=1e-6),
