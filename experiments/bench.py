@@ -22,10 +22,7 @@ MULTIPLE_SHOOTING = {f"solver.gn.{key}": "solver gn solves single-shooting probl
                      "multiple shooting (use ipopt, sqp, rti or rti-c)" for key in ("max_iter", "tol")}
 """Keys a bench with a multiple-shooting NMPC cannot use."""
 SINGLE_SHOOTING = {"solver.rti.condensed": "this bench's NMPC is single shooting: its RTI step has the inputs "
-                                           "as its only unknowns",
-                   "solver.rti.qp_iterations": "this bench's RTI step solves its box-bounded QP with qrqp (an active "
-                                               "set, exact there); the interior-point QP is the multiple-shooting "
-                                               "step's"}
+                                           "as its only unknowns"}
 """Keys a bench with a single-shooting NMPC cannot use."""
 
 

@@ -1,9 +1,9 @@
 """Real time: code-generated RTI solvers (``hystmpc codegen``) and speed per variant (``hystmpc speed``).
 
-The RTI step of a bench's NMPC (:mod:`hystmpc.mpc.rti`) is written as self-contained C99 (qrqp
-included, needs only libm), with a header, a small C ``main`` that replays recorded solver
-inputs without Python, and a Makefile. It is compiled with the system C compiler and
-loaded back into Python; ``verify`` runs the bench's default scenario closed loop with the
+The RTI step of a bench's NMPC (:mod:`hystmpc.mpc.rti`) is written as C99 (needs libm and,
+with the default QP, the DAQP library that CasADi ships), with a header, a small C ``main``
+that replays recorded solver inputs without Python, and a Makefile. It is compiled with the
+system C compiler and loaded back into Python; ``verify`` runs the bench's default scenario closed loop with the
 in-process and with the compiled step and reports the largest difference in applied input.
 """
 
@@ -21,7 +21,7 @@ import casadi as ca
 import numpy as np
 
 from hystmpc.experiments.bench import Bench
-from hystmpc.mpc.rti import COMPILE_FLAGS, _accept_last_qp_iterate, c_compiler
+from hystmpc.mpc.rti import COMPILE_FLAGS, _accept_last_qp_iterate, c_compiler, library_flags
 
 MAIN_C = r"""/* Replays recorded RTI inputs through rti_step without Python; prints timings.
    Input file: first line "n_w n_p count", then count lines of n_w + n_p numbers (w0, p).
@@ -87,13 +87,16 @@ int main(int argc, char** argv) {
 """
 
 MAKEFILE = """# Builds the RTI solver as a shared library (for Python) and the standalone replay program.
+# QP_INCLUDE and QP_LIBS: the QP library the step calls (DAQP from the CasADi package), if any.
 CC ?= cc
 CFLAGS ?= {cflags}
+QP_INCLUDE ?= {qp_include}
+QP_LIBS ?= {qp_libs}
 all: librti_step.so rti_main
 librti_step.so: rti_step.c rti_step.h
-\t$(CC) $(CFLAGS) -fPIC -shared rti_step.c -o librti_step.so -lm
+\t$(CC) $(CFLAGS) $(QP_INCLUDE) -fPIC -shared rti_step.c -o librti_step.so $(QP_LIBS) -lm
 rti_main: main.c rti_step.c rti_step.h
-\t$(CC) $(CFLAGS) main.c rti_step.c -o rti_main -lm
+\t$(CC) $(CFLAGS) $(QP_INCLUDE) main.c rti_step.c -o rti_main $(QP_LIBS) -lm
 clean:
 \trm -f librti_step.so rti_main
 """
@@ -132,9 +135,11 @@ def _compile(out: Path) -> None:
     size = (out / "rti_step.c").stat().st_size
     logging.getLogger("hystmpc").info(f"compiling rti_step.c ({size / 1e3:.0f} kB) and the replay program with "
                                       f"{' '.join(cc)} {' '.join(COMPILE_FLAGS)} in {out}")
+    include, libraries = library_flags((out / "rti_step.c").read_text())
     for cmd in (["make", f"CC={shlex.join(cc)}", "-s"],) if shutil.which("make") else (
-            [*cc, *COMPILE_FLAGS, "-fPIC", "-shared", "rti_step.c", "-o", "librti_step.so", "-lm"],
-            [*cc, *COMPILE_FLAGS, "main.c", "rti_step.c", "-o", "rti_main", "-lm"]):
+            [*cc, *COMPILE_FLAGS, *include, "-fPIC", "-shared", "rti_step.c", "-o", "librti_step.so", *libraries,
+             "-lm"],
+            [*cc, *COMPILE_FLAGS, *include, "main.c", "rti_step.c", "-o", "rti_main", *libraries, "-lm"]):
         done = subprocess.run(cmd, cwd=out, capture_output=True, text=True)
         if done.returncode != 0:
             raise RuntimeError(f"build failed ({' '.join(cmd)}): {done.stderr.strip()[:2000]}")
@@ -151,7 +156,10 @@ def write_solver(bench: Bench, config: dict, out: Path) -> ca.Function:
     gen.generate(str(out) + "/")
     (out / "rti_step.c").write_text(_accept_last_qp_iterate((out / "rti_step.c").read_text()))
     (out / "main.c").write_text(MAIN_C)
-    (out / "Makefile").write_text(MAKEFILE.replace("{cflags}", " ".join(COMPILE_FLAGS)))
+    include, libraries = library_flags((out / "rti_step.c").read_text())
+    makefile = MAKEFILE.replace("{cflags}", " ".join(COMPILE_FLAGS))
+    (out / "Makefile").write_text(makefile.replace("{qp_include}", shlex.join(include))
+                                  .replace("{qp_libs}", shlex.join(libraries)))
     _compile(out)
     return ca.external("rti_step", str(out / "librti_step.so"))
 

@@ -420,11 +420,15 @@ class CreepPredictionModel:
         return {"hysteresis": slice(0, nh), "x": slice(nh, nh + nx), "d": slice(nh + nx, nh + nx + self.nd),
                 "history": slice(nh + nx + self.nd, nh + nx + self.nd + horizon)}
 
-    def horizon_function(self, horizon: int) -> ca.Function:
+    def horizon_function(self, horizon: int, inline: bool = True) -> ca.Function:
         """``(p, U) -> Y``: outputs y_{k+1..k+N} for inputs u_k..u_{k+N−1}.
 
         ``p = [hysteresis state, x_dyn, d, hist_1..hist_N]`` (:meth:`parameter_layout`).
+        ``inline``: one SX expression graph (fast in-process); false: an MX graph that calls
+        one hysteresis step and one dynamics step per sample (small generated C).
         """
+        if not inline:
+            return self._horizon(horizon, linear=False)
         layout = self.parameter_layout(horizon)
         p = ca.SX.sym("p", layout["history"].stop)
         U = ca.SX.sym("U", horizon)
@@ -440,3 +444,63 @@ class CreepPredictionModel:
             x = self.dynamics.step(x, W, d)
             ys.append(self.dynamics.output(x, d))
         return ca.Function("creep_predict", [p, U], [ca.vertcat(*ys)], ["p", "U"], ["Y"])
+
+    def horizon_jacobian(self, horizon: int) -> ca.Function:
+        """``(p, U) -> (Y, dY/dU)``: :meth:`horizon_function` and its Jacobian (lower triangular).
+
+        Built from one hysteresis step and one dynamics step with their Jacobians, called once
+        per predicted sample, with the sensitivities to the inputs carried forward (through the
+        hysteresis state, the Grünwald–Letnikov sum and the dynamic state). Differentiating the
+        unrolled horizon instead gives the same numbers with one C expression per entry: for
+        dea at N = 15, 2.4 MB of generated C.
+        """
+        return self._horizon(horizon, linear=True)
+
+    def _horizon(self, horizon: int, linear: bool) -> ca.Function:
+        layout = self.parameter_layout(horizon)
+        nh, nx = layout["hysteresis"].stop, self.dynamics.nx
+        s_sym, u_sym = ca.SX.sym("s", nh), ca.SX.sym("u")
+        s_next, w = self.smooth(s_sym, u_sym)
+        x_sym, W_sym, d_sym = ca.SX.sym("x", nx), ca.SX.sym("W"), ca.SX.sym("d", self.nd)
+        x_next = self.dynamics.step(x_sym, W_sym, d_sym)
+        y_next = self.dynamics.output(x_next, d_sym)
+        hysteresis_out, dynamics_out = [s_next, w], [x_next, y_next]
+        if linear:
+            hysteresis_out += [ca.jacobian(s_next, s_sym), ca.jacobian(s_next, u_sym), ca.jacobian(w, s_sym),
+                               ca.jacobian(w, u_sym)]
+            x_out = ca.SX.sym("x_out", nx)
+            output_jacobian = ca.Function("output_jacobian", [x_out, d_sym],
+                                          [ca.jacobian(self.dynamics.output(x_out, d_sym), x_out)])
+            dynamics_out += [ca.jacobian(x_next, x_sym), ca.jacobian(x_next, W_sym), output_jacobian(x_next, d_sym)]
+        suffix = "_linear" if linear else ""
+        hysteresis_step = ca.Function(f"hysteresis_step{suffix}", [s_sym, u_sym], hysteresis_out)
+        dynamics_step = ca.Function(f"dynamics_step{suffix}", [x_sym, W_sym, d_sym], dynamics_out)
+        p = ca.MX.sym("p", layout["history"].stop)
+        U = ca.MX.sym("U", horizon)
+        state, x = p[layout["hysteresis"]], p[layout["x"]]
+        d, hist = p[layout["d"]], p[layout["history"]]
+        c = gl_weights(-self.creep_order, horizon)
+        scale = self.sample_period ** self.creep_order
+        S_state, S_x = ca.MX(nh, horizon), ca.MX(nx, horizon)  # d(state)/dU, d(x)/dU
+        ws, dws, ys, dys = [], [], [], []
+        for i in range(horizon):
+            state_next, w_i, *hysteresis_jac = hysteresis_step(state, U[i])
+            ws.append(w_i)
+            W = scale * sum(c[j] * ws[i - j] for j in range(i + 1)) + hist[i]
+            x, y, *dynamics_jac = dynamics_step(x, W, d)
+            ys.append(y)
+            if linear:
+                A_s, B_s, C_w, D_w = hysteresis_jac
+                A_x, B_x, C_y = dynamics_jac
+                unit = ca.DM.zeros(1, horizon)
+                unit[i] = 1
+                dws.append(C_w @ S_state + D_w @ unit)
+                S_state = A_s @ S_state + B_s @ unit
+                dW = scale * sum(c[j] * dws[i - j] for j in range(i + 1))
+                S_x = A_x @ S_x + B_x @ dW
+                dys.append(C_y @ S_x)
+            state = state_next
+        if linear:
+            return ca.Function("creep_predict_jacobian", [p, U], [ca.vertcat(*ys), ca.vertcat(*dys)],
+                               ["p", "U"], ["Y", "dY_dU"])
+        return ca.Function("creep_predict_calls", [p, U], [ca.vertcat(*ys)], ["p", "U"], ["Y"])

@@ -85,8 +85,13 @@ class NmpcController:
         settings, solvers = settings or NmpcSettings(), solvers or SolverSettings()
         self.model, self.bounds, self.settings, self.solvers = model, bounds, settings, solvers
         if isinstance(model, CreepPredictionModel):
-            self.problem: TrackingProblem = SingleShootingProblem(model.horizon_function(settings.horizon),
-                                                                  settings, bounds, solvers)
+            N = settings.horizon
+            compact = {}
+            if settings.solver in ("rti", "rti-c"):  # the RTI step is generated: build it from small parts
+                compact = {"predict_jacobian": model.horizon_jacobian(N),
+                           "compact_predict": model.horizon_function(N, inline=False)}
+            self.problem: TrackingProblem = SingleShootingProblem(model.horizon_function(N), settings, bounds, solvers,
+                                                                  **compact)
         else:
             self.problem = MultipleShootingProblem(model, settings, bounds, solvers)
         if observer is not None and sensor_noise is not None:

@@ -90,8 +90,8 @@ class MultipleShootingProblem(TrackingProblem):
         With no state constraints in this problem, eliminating the states leaves only the
         input bounds and the rate bounds, which are linear in U. A shortened Gauss–Newton
         step then stays feasible, so the step can backtrack on the cost (``step_lengths``).
-        The QP goes to the interior-point solver of :mod:`hystmpc.mpc.qp` (qrqp gets some of these
-        QPs wrong).
+        The QP goes to ``solver.rti.qp``: DAQP (the default) or the interior-point solver of
+        :mod:`hystmpc.mpc.qp` (qrqp gets some of these QPs wrong).
         """
         m, s = self.model, self.settings
         N, nx, nd = s.horizon, m.nx, m.nd
@@ -106,8 +106,8 @@ class MultipleShootingProblem(TrackingProblem):
         lower = np.concatenate((self.u_min * np.ones(N), -self.du_max * np.ones(n_rates)))
         upper = np.concatenate((self.u_max * np.ones(N), self.du_max * np.ones(n_rates)))
         linearise, cost = self._condensed_linearisation(p.numel(), n_rates)
-        return gauss_newton_step(linearise, cost, lower, upper, step_lengths=(0.5, 0.25, 0.125), qp="ipm",
-                                 qp_iterations=self.solvers.rti.qp_iterations)
+        return gauss_newton_step(linearise, cost, lower, upper, step_lengths=(0.5, 0.25, 0.125),
+                                 qp=self.solvers.rti.qp, qp_iterations=self.solvers.rti.qp_iterations)
 
     def _condensed_linearisation(self, n_p: int, n_rates: int) -> tuple[ca.Function, ca.Function]:
         """``linearise(U, p) -> (H, Jᵀr, A, g)`` and ``cost(U, p)`` of the condensed problem.

@@ -3,9 +3,9 @@
 The tracking cost of :mod:`hystmpc.mpc.problem` is a sum of squares, ``Σ ‖r(w, p)‖²``, so the
 Gauss–Newton Hessian ``JᵀJ`` is positive semidefinite and needs no convexification. One
 step linearises the shooting and rate constraints at the warm start ``w``, solves the QP
-with qrqp (self-contained C99 when generated), and returns ``w + Δw``. Wrapped as one
-Function ``rti_step(w, p) -> w_next``, the whole step can be code-generated and compiled
-(:func:`compile_function`), which is the ``rti-c`` variant.
+(DAQP, qrqp or the interior-point QP of :mod:`hystmpc.mpc.qp`), and returns ``w + Δw``.
+Wrapped as one Function ``rti_step(w, p) -> w_next``, the whole step can be code-generated
+and compiled (:func:`compile_function`), which is the ``rti-c`` variant.
 """
 
 from __future__ import annotations
@@ -21,6 +21,9 @@ from pathlib import Path
 
 import casadi as ca
 import numpy as np
+
+QP_SOLVERS = ("qrqp", "daqp", "ipm")
+"""QP solvers of the Gauss–Newton step (:func:`gauss_newton_step`)."""
 
 REGULARISATION = 1e-8
 """Added to the diagonal of JᵀJ: states enter the cost only through constraints."""
@@ -44,14 +47,17 @@ def rti_function(residual: ca.Function, constraints: ca.Function, lbg, ubg, lbx,
         (a fixed backtracking, code-generatable). Only sound where every constraint is
         convex in ``w``, so that a shortened QP step stays feasible: single shooting with
         linear constraints, not multiple shooting.
-    qp : {"qrqp", "ipm"}
+    qp : {"qrqp", "daqp", "ipm"}
         ``qrqp``: CasADi's active-set solver (any bounds; wrong on some problems with
-        inequality rows, see :mod:`hystmpc.mpc.qp`). ``ipm``: :func:`hystmpc.mpc.qp.interior_point_qp`
-        with ``qp_iterations`` iterations (all bounds finite).
+        inequality rows, see :mod:`hystmpc.mpc.qp`). ``daqp``: DAQP, a dual active-set
+        solver for small dense QPs (through CasADi; the generated C calls the DAQP library
+        that CasADi ships). ``ipm``: :func:`hystmpc.mpc.qp.interior_point_qp` with
+        ``qp_iterations`` iterations (all bounds finite).
 
     The second output, ``qp_error``, says how far the QP answer is from trustworthy: for
     ``ipm`` its final residual, for ``qrqp`` the largest constraint violation of its answer,
-    each row's divided by the larger of its half width and 1. Callers count a step above
+    each row's divided by the larger of its half width and 1, for ``daqp`` the larger of
+    that violation and the relative stationarity residual. Callers count a step above
     :data:`QP_TOLERANCE` as a failed solve.
     """
     lower = np.concatenate((np.ravel(lbx), np.ravel(lbg))).astype(float)
@@ -77,8 +83,8 @@ def gauss_newton_step(linearise: ca.Function, cost: ca.Function, lower, upper, n
     (used by ``step_lengths`` only). ``lower`` and ``upper`` bound ``[w; g]``. The other
     parameters are :func:`rti_function`'s.
     """
-    if qp not in ("qrqp", "ipm"):
-        raise ValueError(f"qp {qp!r} is unknown; allowed: qrqp, ipm")
+    if qp not in QP_SOLVERS:
+        raise ValueError(f"qp {qp!r} is unknown; allowed: {', '.join(QP_SOLVERS)}")
     n = linearise.size1_in(0)
     w = ca.MX.sym("w", n)
     p = ca.MX.sym("p", linearise.size1_in(1))
@@ -92,6 +98,16 @@ def gauss_newton_step(linearise: ca.Function, cost: ca.Function, lower, upper, n
         from hystmpc.mpc.qp import interior_point_qp
         solver = interior_point_qp(linearise.sparsity_out(0), C.sparsity(), qp_iterations)
         step, qp_error, _ = solver(H_mx, grad, C, l_mx, u_mx)
+    elif qp == "daqp":
+        solver = ca.conic(f"{name}_qp", "daqp", {"h": linearise.sparsity_out(0), "a": linearise.sparsity_out(2)},
+                          {"error_on_fail": False})
+        solution = solver(h=H_mx, g=grad, a=A_mx, lba=l_mx[n:], uba=u_mx[n:], lbx=l_mx[:n], ubx=u_mx[:n])
+        step = solution["x"]
+        # DAQP's iterates are dual feasible: one that stopped short violates a constraint
+        qp_error = ca.fmax(_constraint_violation(C @ step, l_mx, u_mx, lower, upper),
+                           _stationarity(H_mx, grad, A_mx, step, solution["lam_x"], solution["lam_a"]))
+        finite = ca.sum1(ca.fabs(step)) < ca.inf  # false for a NaN or infinite entry, which fmax would hide
+        qp_error = ca.if_else(finite, qp_error, ca.inf)
     else:
         solver = ca.conic(f"{name}_qp", "qrqp", {"h": linearise.sparsity_out(0), "a": linearise.sparsity_out(2)},
                           {"print_iter": False, "print_header": False, "error_on_fail": False})
@@ -107,6 +123,14 @@ def gauss_newton_step(linearise: ca.Function, cost: ca.Function, lower, upper, n
             w_next = ca.if_else(better, trial, w_next)
             best_cost = ca.if_else(better, trial_cost, best_cost)
     return ca.Function(name, [w, p], [w_next, qp_error], ["w", "p"], ["w_next", "qp_error"])
+
+
+def _stationarity(H, g, A, x, lam_x, lam_a):
+    """Largest entry of ``Hx + g + λx + Aᵀλa`` (zero at a KKT point, CasADi's sign convention),
+    relative to the largest of the terms and 1."""
+    Hx, A_lam = H @ x, A.T @ lam_a
+    size = ca.fmax(1.0, ca.mmax(ca.fabs(ca.vertcat(Hx, g, lam_x, A_lam))))
+    return ca.mmax(ca.fabs(Hx + g + lam_x + A_lam)) / size
 
 
 def _constraint_violation(Cx, l_mx, u_mx, lower, upper):
@@ -161,7 +185,9 @@ def compile_function(fun: ca.Function, out_dir: Path | None = None, flags=COMPIL
     gen.add(fun)
     source = _accept_last_qp_iterate(gen.dump())
     compiler = c_compiler()
-    digest = hashlib.sha256((source + " ".join([*(compiler or []), *flags])).encode()).hexdigest()[:16]
+    include, libraries = library_flags(source)
+    key = source + " ".join([*(compiler or []), *flags, *include, *libraries])
+    digest = hashlib.sha256(key.encode()).hexdigest()[:16]
     build = out_dir / f"{name}_{digest}"
     library = build / f"{name}.so"
     if not library.exists():
@@ -172,7 +198,8 @@ def compile_function(fun: ca.Function, out_dir: Path | None = None, flags=COMPIL
         # private names, then an atomic rename: sweep workers may build the same step at once
         private = f"{name}.{os.getpid()}"
         (build / f"{private}.c").write_text(source)
-        cmd = [*compiler, *flags, "-fPIC", "-shared", f"{private}.c", "-o", f"{private}.so", "-lm"]
+        cmd = [*compiler, *flags, *include, "-fPIC", "-shared", f"{private}.c", "-o", f"{private}.so", *libraries,
+               "-lm"]
         command = " ".join(cmd[:len(compiler) + len(flags)])
         LOG.info(f"compiling {name} ({len(source) / 1e3:.0f} kB of C) with {command}; once, cached in {build.parent}")
         start = time.perf_counter()
@@ -183,6 +210,18 @@ def compile_function(fun: ca.Function, out_dir: Path | None = None, flags=COMPIL
         os.replace(build / f"{private}.so", library)
         LOG.info(f"compiled {name} in {time.perf_counter() - start:.1f} s")
     return ca.external(name, str(library))
+
+
+def library_flags(source: str) -> tuple[list[str], list[str]]:
+    """``(include flags, libraries)`` that generated C needs beyond libm: DAQP's headers and
+    static library from the CasADi package when the source calls DAQP, else nothing."""
+    if "#include <daqp/" not in source:
+        return [], []
+    casadi_dir = Path(ca.__file__).parent
+    static = casadi_dir / "libdaqpstat.a"
+    if static.exists():
+        return [f"-I{casadi_dir / 'include'}"], [str(static)]
+    return [f"-I{casadi_dir / 'include'}"], [f"-L{casadi_dir}", "-ldaqp", f"-Wl,-rpath,{casadi_dir}"]
 
 
 class CompilerNotFound(RuntimeError):

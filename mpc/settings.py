@@ -135,10 +135,16 @@ class RtiSettings:
     QP has the N inputs only and the step backtracks on the cost; false: the QP over states
     and inputs with the shooting gaps as constraints, full step (qrqp). Single-shooting
     problems are condensed by construction and reject false."""
+    qp: str = "daqp"
+    """QP solver of the condensed and single-shooting steps: ``daqp`` (a dual active-set
+    solver, exact on these small dense QPs) or ``ipm`` (the interior-point QP of
+    :mod:`hystmpc.mpc.qp`, ``qp_iterations`` iterations)."""
     qp_iterations: int = 30
-    """Interior-point iterations of the condensed step's QP (fixed: real time)."""
+    """Interior-point iterations of the ``ipm`` QP (fixed: real time)."""
 
     def __post_init__(self):
+        if self.qp not in ("daqp", "ipm"):
+            raise ValueError(f"qp must be one of daqp, ipm, got {self.qp!r}")
         if self.iterations < 1:
             raise ValueError(f"iterations must be >= 1, got {self.iterations}")
         if self.qp_iterations < 10:

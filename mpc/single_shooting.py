@@ -15,7 +15,7 @@ import casadi as ca
 import numpy as np
 
 from hystmpc.mpc.problem import Solution, TrackingProblem
-from hystmpc.mpc.rti import compiled_or_in_process, rti_function
+from hystmpc.mpc.rti import REGULARISATION, compiled_or_in_process, gauss_newton_step, rti_function
 from hystmpc.mpc.settings import InputBounds, NmpcSettings, SolverSettings
 
 
@@ -35,10 +35,15 @@ class SingleShootingProblem(TrackingProblem):
         Input bounds and largest change per sample.
     solvers : SolverSettings
         Settings of every solver (``solver.rti.condensed=false`` does not apply).
+    predict_jacobian, compact_predict : casadi.Function, optional
+        ``(p, U) -> (Y, dY/dU)`` and a ``predict`` that generates small C (function calls per
+        sample rather than one unrolled graph). Given both, the ``rti`` step is built from
+        them; otherwise from ``predict``'s symbolic Jacobian.
     """
 
     def __init__(self, predict: ca.Function, settings: NmpcSettings, bounds: InputBounds,
-                 solvers: SolverSettings | None = None):
+                 solvers: SolverSettings | None = None, *, predict_jacobian: ca.Function | None = None,
+                 compact_predict: ca.Function | None = None):
         N = settings.horizon
         if predict.size1_in(1) != N or predict.size1_out(0) != N:
             raise ValueError(f"predict must map {N} inputs to {N} outputs, "
@@ -49,6 +54,7 @@ class SingleShootingProblem(TrackingProblem):
                              "problem has the inputs as its only unknowns")
         super().__init__(settings, bounds, solvers, predict.size1_in(0))
         self.predict = predict
+        self._predict_jacobian, self._compact_predict = predict_jacobian, compact_predict
         U = ca.SX.sym("U", N)
         p = ca.SX.sym("p", self.n_condition)
         u_prev = ca.SX.sym("u_prev")
@@ -74,6 +80,28 @@ class SingleShootingProblem(TrackingProblem):
                 + settings.r_input * ca.sumsqr(U - u_ff))
         self._uses_nlp_solver({"x": U, "f": cost, "g": du if rate_bounded else ca.SX(0, 1), "p": params})
 
+    def _linearisation(self, n_params: int) -> tuple[ca.Function, ca.Function]:
+        """``linearise(U, params) -> (H, Jᵀr, A, g)`` and ``cost(U, params)`` from the model's
+        ``predict_jacobian`` and ``compact_predict`` (see :func:`hystmpc.mpc.rti.gauss_newton_step`)."""
+        s, N, n = self.settings, self.horizon, self.n_condition
+        U, params = ca.MX.sym("U", N), ca.MX.sym("params", n_params)
+        p, u_prev, ref, u_ff = params[:n], params[n], params[n + 1: n + 1 + N], params[n + 1 + N:]
+        D = ca.DM(np.eye(N) - np.eye(N, k=-1))
+        du = U - ca.vertcat(u_prev, U[:-1])
+        y, dy = self._predict_jacobian(p, U)
+
+        def residual(outputs):
+            return ca.vertcat(np.sqrt(s.q_output) * (outputs - ref), np.sqrt(s.r_rate) * du,
+                              np.sqrt(s.r_input) * (U - u_ff))
+
+        r = residual(y)
+        J = ca.vertcat(np.sqrt(s.q_output) * dy, np.sqrt(s.r_rate) * D, np.sqrt(s.r_input) * ca.DM.eye(N))
+        H = J.T @ J + REGULARISATION * ca.DM.eye(N)
+        A, g = (ca.MX(ca.sparsify(D)), du) if self._rate_bounded else (ca.MX(0, N), ca.MX(0, 1))
+        linearise = ca.Function("rti_linearise", [U, params], [H, J.T @ r, A, g])
+        cost = ca.Function("rti_cost", [U, params], [ca.sumsqr(residual(self._compact_predict(p, U)))])
+        return linearise, cost
+
     def _build_gauss_newton(self, U, params, residual) -> None:
         N = self.horizon
         J = ca.jacobian(residual, U)
@@ -86,12 +114,19 @@ class SingleShootingProblem(TrackingProblem):
 
     def _build_rti(self, U, params, residual, du) -> None:
         """One Gauss–Newton step per sample as one Function (``rti``), compiled for ``rti-c``."""
-        residual = ca.Function("residual", [U, params], [residual])
-        constraints = ca.Function("constraints", [U, params], [du if self._rate_bounded else ca.SX(0, 1)])
-        b = self._bounds
+        b, rti = self._bounds, self.solvers.rti
         # the constraints are linear in U, so a shortened step stays feasible: backtrack as gn does
-        self.rti = rti_function(residual, constraints, b["lbg"], b["ubg"], b["lbx"], b["ubx"],
-                                step_lengths=(0.5, 0.25, 0.125))
+        if self._predict_jacobian is not None and self._compact_predict is not None:
+            linearise, cost = self._linearisation(params.numel())
+            lower = np.concatenate((b["lbx"], b["lbg"]))
+            upper = np.concatenate((b["ubx"], b["ubg"]))
+            self.rti = gauss_newton_step(linearise, cost, lower, upper, step_lengths=(0.5, 0.25, 0.125), qp=rti.qp,
+                                         qp_iterations=rti.qp_iterations)
+        else:
+            residual = ca.Function("residual", [U, params], [residual])
+            constraints = ca.Function("constraints", [U, params], [du if self._rate_bounded else ca.SX(0, 1)])
+            self.rti = rti_function(residual, constraints, b["lbg"], b["ubg"], b["lbx"], b["ubx"],
+                                    step_lengths=(0.5, 0.25, 0.125), qp=rti.qp, qp_iterations=rti.qp_iterations)
         if self.settings.solver == "rti-c":
             self.rti, self.compiled = compiled_or_in_process(self.rti)
 

@@ -43,6 +43,28 @@ def test_prediction_with_history_terms_matches_the_exact_model():
     assert np.max(np.abs(y_pred - y_true)) < 2e-3
 
 
+def test_forward_sensitivities_give_the_symbolic_jacobian_of_the_prediction():
+    """The RTI step's small-code linearisation (sensitivities carried through the KP state,
+    the GL sum and the membrane) equals CasADi's Jacobian of the unrolled prediction."""
+    import casadi as ca
+    N = 15
+    model = prediction_model(replace(NOMINAL, noise=0.0), eps=1e-4, direction_eps=1e-5)
+    predict, compact, jacobian = model.horizon_function(N), model.horizon_function(N, inline=False), \
+        model.horizon_jacobian(N)
+    rng = np.random.default_rng(0)
+    U_sym = ca.SX.sym("U", N)
+    for _ in range(5):
+        params = np.concatenate((rng.uniform(-0.5, 0.5, len(model.hysteresis.state_names)), rng.normal(size=2) * 0.1,
+                                 [0.01], rng.normal(size=N) * 0.1))
+        U = rng.uniform(1.0, 5.0, N)
+        symbolic = np.asarray(ca.Function("j", [U_sym], [ca.jacobian(predict(params, U_sym), U_sym)])(U))
+        y, dy = (np.asarray(v) for v in jacobian(params, U))
+        assert np.max(np.abs(dy - symbolic)) <= 1e-10 * (1 + np.max(np.abs(symbolic)))
+        assert np.max(np.abs(dy[np.triu_indices(N, 1)])) == 0.0  # causal
+        assert np.array_equal(y, np.asarray(predict(params, U)))
+        assert np.array_equal(np.asarray(compact(params, U)), y)
+
+
 @pytest.mark.parametrize("controller", ["pid", "backstepping", "bic", "linear-mpc", "nmpc"])
 def test_every_controller_runs_within_the_input_range(controller):
     run = BENCH.run(BENCH.scenarios["single-sine"], controller, BENCH.configure(), duration=3.0)

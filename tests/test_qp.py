@@ -1,4 +1,4 @@
-"""The interior-point QP of mpc.qp against OSQP, and the qrqp failure it replaces."""
+"""The interior-point QP of mpc.qp and DAQP against OSQP, and the qrqp failure they replace."""
 
 import casadi as ca
 import numpy as np
@@ -7,7 +7,7 @@ import pytest
 import scipy.sparse as sp
 
 from hystmpc.mpc.qp import interior_point_qp
-from hystmpc.mpc.rti import CompilerNotFound, c_compiler, compile_function
+from hystmpc.mpc.rti import CompilerNotFound, c_compiler, compile_function, gauss_newton_step
 
 N = 10
 RATES = np.eye(N) - np.eye(N, k=-1)
@@ -108,3 +108,34 @@ def test_qrqp_still_gets_a_small_rate_bounded_qp_wrong():
     x_ipm = np.asarray(ipm(H, g, np.vstack((np.eye(8), A)), np.r_[-2 * np.ones(8), -0.15 * np.ones(8)],
                            np.r_[2 * np.ones(8), 0.15 * np.ones(8)])[0]).ravel()
     assert x_ipm == pytest.approx(0.15 * np.arange(1, 9), abs=1e-8)
+
+
+def _qp_as_gauss_newton_step(qp: str):
+    """``step(w=0, p=[vec(H); g]) -> (x, qp_error)``: the Gauss–Newton step on a quadratic cost
+    solves ``min ½ xᵀHx + gᵀx, l <= x <= u, |Dx| <= du`` exactly (bounds of the random problems
+    are baked in per call, so they come back with the step)."""
+    w, p = ca.SX.sym("w", N), ca.SX.sym("p", N * N + N)
+    H, g = ca.reshape(p[: N * N], N, N), p[N * N:]
+    linearise = ca.Function("lin", [w, p], [H, H @ w + g, ca.DM(RATES), RATES @ w])
+    cost = ca.Function("cost", [w, p], [0.5 * w.T @ H @ w + g.T @ w])
+    return lambda l, u: gauss_newton_step(linearise, cost, l, u, qp=qp)
+
+
+def test_daqp_step_matches_osqp_and_the_interior_point_step_on_random_badly_scaled_problems():
+    make_daqp, make_ipm = _qp_as_gauss_newton_step("daqp"), _qp_as_gauss_newton_step("ipm")
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        H, g, l, u, du = _random_problem(rng)
+        p = np.r_[H.ravel(order="F"), g]
+        x, qp_error = make_daqp(l, u)(np.zeros(N), p)
+        assert float(qp_error) <= 1e-9
+        assert np.max(np.abs(np.asarray(x).ravel() - _osqp(H, g, l, u))) <= 1e-6 * du
+        x_ipm, _ = make_ipm(l, u)(np.zeros(N), p)
+        assert np.max(np.abs(np.asarray(x).ravel() - np.asarray(x_ipm).ravel())) <= 1e-5 * du
+
+
+def test_daqp_step_reports_a_qp_it_could_not_solve():
+    H, g, l, u, _ = _random_problem(np.random.default_rng(5))
+    step = _qp_as_gauss_newton_step("daqp")(l, u)
+    _, qp_error = step(np.zeros(N), np.r_[H.ravel(order="F"), g * np.nan])
+    assert not float(qp_error) <= 1e-6  # NaN or large: either way the controller counts a failure

@@ -77,11 +77,12 @@ def test_rti_step_lengths_take_the_best_of_the_shortened_steps():
     assert float(searched(0.1, 0)[0]) == pytest.approx(0.1 + 0.125 * 9.9)  # lowest cost of 10, 5.05, 2.575, 1.3375
 
 
-@pytest.mark.parametrize("condensed", [True, False])
-def test_repeated_rti_steps_reach_the_converged_solution_or_say_they_failed(condensed):
-    """Iterated, the condensed RTI step (inputs only, interior-point QP) solves the same
-    problem as IPOPT (a smooth two-state model with active rate bounds). The multiple-shooting
-    step's qrqp gets this QP wrong, and the step reports it instead of passing it on."""
+@pytest.mark.parametrize("condensed, qp", [(True, "daqp"), (True, "ipm"), (False, "daqp")])
+def test_repeated_rti_steps_reach_the_converged_solution_or_say_they_failed(condensed, qp):
+    """Iterated, the condensed RTI step (inputs only, DAQP or the interior-point QP) solves the
+    same problem as IPOPT (a smooth two-state model with active rate bounds). The
+    multiple-shooting step's qrqp gets this QP wrong, and the step reports it instead of
+    passing it on."""
     import casadi as ca
     import numpy as np
 
@@ -98,7 +99,7 @@ def test_repeated_rti_steps_reach_the_converged_solution_or_say_they_failed(cond
     ipopt = MultipleShootingProblem(model, NmpcSettings(solver="ipopt", **common), bounds,
                                     SolverSettings(ipopt=NlpSettings(tol=1e-12, max_iter=500)))
     rti = MultipleShootingProblem(model, NmpcSettings(solver="rti", **common), bounds,
-                                  SolverSettings(rti=RtiSettings(condensed=condensed, iterations=30)))
+                                  SolverSettings(rti=RtiSettings(condensed=condensed, iterations=30, qp=qp)))
     assert rti.condensed == condensed
     x0, dist = np.array([0.1, -0.2]), np.array([0.05])
     ref = 0.25 * np.sin(np.linspace(0.3, 2.0, 8))
@@ -115,7 +116,7 @@ def test_repeated_rti_steps_reach_the_converged_solution_or_say_they_failed(cond
 
 
 def test_condensed_rti_step_without_a_rate_bound():
-    """An unbounded rate leaves only the input bounds in the interior-point QP."""
+    """An unbounded rate leaves only the input bounds in the QP."""
     import casadi as ca
     import numpy as np
 

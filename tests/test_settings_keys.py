@@ -21,7 +21,8 @@ from hystmpc.experiments.config import OPTION, allowed_keys, get_value
 SAMPLES = 12
 ACTIVATE = {
     "solver.ipopt.": ["nmpc.solver=ipopt"], "solver.sqp.": ["nmpc.solver=sqp"],
-    "solver.rti.": ["nmpc.solver=rti"], "solver.gn.": ["nmpc.solver=gn"],
+    "solver.rti.": ["nmpc.solver=rti"], "solver.rti.qp_iterations": ["solver.rti.qp=ipm"],
+    "solver.gn.": ["nmpc.solver=gn"],
     "ccore.": ["rig.core=C"], "pi.derivative_filter": ["pi.kd=0.05"],
 }
 """Key prefix -> the assignments that switch on what reads it (applied to both runs)."""
@@ -37,6 +38,8 @@ def _changed(bench_name: str, key: str, value) -> str:
     field = key.rsplit(".", 1)[-1]
     if field == "solver":
         return OTHER_SOLVER[bench_name]
+    if field == "qp":
+        return "daqp" if value == "ipm" else "ipm"
     if VALUES.get(field) is not None and VALUES[field] != str(value):  # else the bench's default: change it
         return VALUES[field]
     if isinstance(value, bool):
