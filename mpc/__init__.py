@@ -8,7 +8,7 @@
 * :class:`InverseLinearMpc`, :class:`LinearMpcSettings`: the strong conventional
   alternative, an inverse-model compensation plus an offset-free linear MPC (OSQP).
 * :mod:`hystmpc.mpc.rti`: the real-time iteration step as one code-generatable Function;
-  :mod:`hystmpc.mpc.qp`: the interior-point QP it uses.
+  :mod:`hystmpc.mpc.qp`: the interior-point QP it can use instead of DAQP.
 """
 
 from hystmpc.mpc.controller import NmpcController, default_observer

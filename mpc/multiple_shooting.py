@@ -41,6 +41,8 @@ class MultipleShootingProblem(TrackingProblem):
         super().__init__(settings, bounds, solvers or SolverSettings(), model.nx + model.nd)
         self.model = model
         self.condensed = settings.solver in ("rti", "rti-c") and self.solvers.rti.condensed
+        if settings.solver in ("rti", "rti-c"):
+            self.solvers.rti.check_step(self.condensed)
         self._build()
 
     def _build(self) -> None:

@@ -106,7 +106,8 @@ def gauss_newton_step(linearise: ca.Function, cost: ca.Function, lower, upper, n
         # DAQP's iterates are dual feasible: one that stopped short violates a constraint
         qp_error = ca.fmax(_constraint_violation(C @ step, l_mx, u_mx, lower, upper),
                            _stationarity(H_mx, grad, A_mx, step, solution["lam_x"], solution["lam_a"]))
-        finite = ca.sum1(ca.fabs(step)) < ca.inf  # false for a NaN or infinite entry, which fmax would hide
+        # false for a NaN or infinite entry, which fmax and mmax would hide
+        finite = ca.sum1(ca.fabs(ca.vertcat(step, solution["lam_x"], solution["lam_a"]))) < ca.inf
         qp_error = ca.if_else(finite, qp_error, ca.inf)
     else:
         solver = ca.conic(f"{name}_qp", "qrqp", {"h": linearise.sparsity_out(0), "a": linearise.sparsity_out(2)},
@@ -173,9 +174,9 @@ def c_compiler() -> list[str] | None:
 def compile_function(fun: ca.Function, out_dir: Path | None = None, flags=COMPILE_FLAGS) -> ca.Function:
     """Generate C99 for ``fun``, compile it with the system C compiler and load it back.
 
-    Builds are cached by the hash of the generated source, the compiler command and the
-    flags, so the same problem compiles once; a compilation says what it does on the
-    ``hystmpc`` logger.
+    Builds are cached by the hash of the generated source, the compiler command, the
+    flags and the QP library's include and link flags (:func:`library_flags`), so the same
+    problem compiles once; a compilation says what it does on the ``hystmpc`` logger.
     Raises ``RuntimeError`` with the compiler's message on failure, and
     :class:`CompilerNotFound` when there is no compiler.
     """
@@ -239,13 +240,28 @@ def compiled_or_in_process(fun: ca.Function) -> tuple[ca.Function, bool]:
 
 
 def _accept_last_qp_iterate(source: str) -> str:
-    """Make generated qrqp return its last iterate when it stops short, as the in-process
-    solver does with ``error_on_fail: False`` (CasADi's C output ignores that option and
-    makes the whole call fail). The RTI step is then the same function in C and in Python."""
-    failing = "  } else if (d.status == QP_NO_SEARCH_DIR) {\n    return 4;\n  } else {\n    return -1;\n  }"
-    patched = source.replace(failing, "  } else {\n    return 0;\n  }")
-    if "QP_NO_SEARCH_DIR) {\n    return 4;" in patched:
-        raise RuntimeError("could not patch the generated qrqp return codes; CasADi's output changed")
+    """Make generated QP calls return their last iterate when they stop short, as the
+    in-process solvers do with ``error_on_fail: False`` (CasADi's C output ignores that option
+    and makes the whole call fail). The RTI step is then the same function in C and in
+    Python, and a failed QP is counted by ``qp_error`` instead of aborting the step.
+
+    qrqp: every status returns 0. DAQP: the step goes on whatever DAQP's exit, and when its
+    setup fails (an H that is not positive definite) the answer is NaN, so ``qp_error`` is
+    infinite."""
+    patched = source
+    if "casadi_qrqp" in source:
+        failing = "  } else if (d.status == QP_NO_SEARCH_DIR) {\n    return 4;\n  } else {\n    return -1;\n  }"
+        patched = patched.replace(failing, "  } else {\n    return 0;\n  }")
+        if "QP_NO_SEARCH_DIR) {\n    return 4;" in patched:
+            raise RuntimeError("could not patch the generated qrqp return codes; CasADi's output changed")
+    if "casadi_daqp_solve" in source:
+        setup_failed = "  if (flag<0) return 1;\n"
+        not_optimal = "  casadi_daqp_solve(d, arg, res, iw, w);\n  if (!d_qp.success) {\n    return -1;\n  }\n"
+        if setup_failed not in patched or not_optimal not in patched:
+            raise RuntimeError("could not patch the generated DAQP call; CasADi's output changed")
+        patched = patched.replace(setup_failed, "  if (flag<0) {\n    for (i=0;i<p_qp->nx;++i) d_qp->x[i] = 0.0/0.0;\n"
+                                                "    d_qp->success = 0;\n    return 1;\n  }\n")
+        patched = patched.replace(not_optimal, "  casadi_daqp_solve(d, arg, res, iw, w);\n")
     return patched
 
 
@@ -270,9 +286,15 @@ def feasible_guess(u_guess, u_prev: float, u_min: float, u_max: float, du_max: f
 
 
 def rti_steps(rti: ca.Function, w0, p, iterations: int) -> tuple[np.ndarray, float]:
-    """``iterations`` RTI steps from ``w0``; returns the last iterate and the worst ``qp_error``."""
+    """``iterations`` RTI steps from ``w0``; returns the last iterate and the worst ``qp_error``
+    (NaN if any was; infinite when an iterate is not finite, which ends the steps: an
+    in-process QP refuses NaN bounds)."""
     w, worst = np.asarray(w0, float), 0.0
     for _ in range(iterations):
         w_next, qp_error = rti(w, p)
-        w, worst = np.asarray(w_next).ravel(), max(worst, float(qp_error))
+        w, qp_error = np.asarray(w_next).ravel(), float(qp_error)
+        if not qp_error <= worst:  # larger, or NaN
+            worst = qp_error
+        if not np.all(np.isfinite(w)):
+            return w, np.inf
     return w, worst

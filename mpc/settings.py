@@ -15,7 +15,7 @@ import numpy as np
 SOLVERS = ("ipopt", "sqp", "rti", "rti-c", "gn")
 """Solver variants: IPOPT; CasADi sqpmethod + qrqp; ``rti``, one Gauss–Newton
 SQP step per sample as one CasADi Function (:mod:`hystmpc.mpc.rti`; on multiple-shooting
-problems condensed onto the inputs, with the interior-point QP of :mod:`hystmpc.mpc.qp`);
+problems condensed onto the inputs, with DAQP or the interior-point QP of :mod:`hystmpc.mpc.qp`);
 ``rti-c`` (the default), the same generated as C, compiled and loaded (in-process, with a
 notice, when there is no C compiler); ``gn``, Gauss–Newton SQP to convergence
 (single-shooting problems only)."""
@@ -137,10 +137,20 @@ class RtiSettings:
     problems are condensed by construction and reject false."""
     qp: str = "daqp"
     """QP solver of the condensed and single-shooting steps: ``daqp`` (a dual active-set
-    solver, exact on these small dense QPs) or ``ipm`` (the interior-point QP of
-    :mod:`hystmpc.mpc.qp`, ``qp_iterations`` iterations)."""
+    solver; its answers match qpOASES' on these small dense QPs) or ``ipm`` (the
+    interior-point QP of :mod:`hystmpc.mpc.qp`, ``qp_iterations`` iterations). The step over
+    states and inputs (``condensed=false``) solves with qrqp and refuses ``ipm``."""
     qp_iterations: int = 30
-    """Interior-point iterations of the ``ipm`` QP (fixed: real time)."""
+    """Interior-point iterations of the ``ipm`` QP (fixed: real time); refused with ``daqp``."""
+
+    def check_step(self, condensed: bool) -> None:
+        """Refuse the settings this RTI step would not use (``ValueError``)."""
+        if self.qp != "ipm" and self.qp_iterations != RtiSettings.qp_iterations:
+            raise ValueError(f"solver.rti.qp_iterations={self.qp_iterations} applies to solver.rti.qp=ipm only "
+                             f"(qp is {self.qp})")
+        if self.qp == "ipm" and not condensed:
+            raise ValueError("solver.rti.qp=ipm needs solver.rti.condensed=true: the step over states and inputs "
+                             "has unbounded states and solves with qrqp")
 
     def __post_init__(self):
         if self.qp not in ("daqp", "ipm"):

@@ -18,7 +18,6 @@ from hystmpc.mpc.problem import Solution, TrackingProblem
 from hystmpc.mpc.rti import (
     LOG,
     REGULARISATION,
-    CompilerNotFound,
     compile_function,
     compiled_or_in_process,
     gauss_newton_step,
@@ -119,8 +118,8 @@ class SingleShootingProblem(TrackingProblem):
         evaluate = ca.Function("gn_eval", [U, params], [residual, ca.jacobian(residual, U)])
         try:  # compiled: the same numbers to the last bit, a fifth of the time (dea: 71 against 342 µs per call)
             self._gn_eval = compile_function(evaluate, flags=GN_COMPILE_FLAGS)
-        except CompilerNotFound as exc:
-            LOG.warning(f"{exc}: solver gn evaluates its residual and Jacobian in-process, slower")
+        except RuntimeError as exc:  # no compiler, or one that fails: gn still works, slower
+            LOG.warning(f"{str(exc)[:300]}: solver gn evaluates its residual and Jacobian in-process, slower")
             self._gn_eval = evaluate
         H = ca.Sparsity.dense(N, N)
         A = ca.DM(np.eye(N) - np.eye(N, k=-1)) if self._rate_bounded else ca.DM(0, N)
@@ -131,8 +130,11 @@ class SingleShootingProblem(TrackingProblem):
     def _build_rti(self, U, params, residual, du) -> None:
         """One Gauss–Newton step per sample as one Function (``rti``), compiled for ``rti-c``."""
         b, rti = self._bounds, self.solvers.rti
+        rti.check_step(condensed=True)
         # the constraints are linear in U, so a shortened step stays feasible: backtrack as gn does
-        if self._predict_jacobian is not None and self._compact_predict is not None:
+        if (self._predict_jacobian is None) != (self._compact_predict is None):
+            raise ValueError("give both predict_jacobian and compact_predict, or neither")
+        if self._predict_jacobian is not None:
             linearise, cost = self._linearisation(params.numel())
             lower = np.concatenate((b["lbx"], b["lbg"]))
             upper = np.concatenate((b["ubx"], b["ubg"]))

@@ -124,3 +124,37 @@ def test_the_plants_creep_causes_almost_none_of_bics_error_on_composite():
     creep_free = apply_overrides(config, ["plant.fckp.creep_order=0"])
     without_creep = BENCH.run(BENCH.scenarios["composite"], "bic", creep_free).metrics["rmse"]
     assert abs(with_creep - without_creep) < 0.05 * with_creep  # Table 3 is a 43 % cut
+
+
+def test_gn_compiled_gives_the_in_process_numbers_to_the_last_bit(monkeypatch, caplog):
+    """gn compiles its residual and Jacobian; without a compiler it evaluates them in-process,
+    after a notice, and the numbers are the same bit for bit (so are the closed loops)."""
+    from hystmpc.mpc import single_shooting
+    from hystmpc.mpc.rti import CompilerNotFound
+    compiled = BENCH.build_controller("nmpc", BENCH.configure()).problem
+
+    def no_compiler(*_, **__):
+        raise CompilerNotFound("no C compiler found (test)")
+
+    monkeypatch.setattr(single_shooting, "compile_function", no_compiler)
+    in_process = BENCH.build_controller("nmpc", BENCH.configure()).problem
+    assert "evaluates its residual and Jacobian in-process" in caplog.text
+    rng = np.random.default_rng(1)
+    n_p = compiled._gn_eval.size1_in(1)
+    for _ in range(5):
+        u, p = rng.uniform(1.0, 6.0, compiled.horizon), rng.normal(size=n_p) * 0.1
+        for a, b in zip(compiled._gn_eval(u, p), in_process._gn_eval(u, p), strict=True):
+            assert np.array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_rti_step_from_small_parts_equals_the_unrolled_one():
+    from hystmpc.mpc.single_shooting import SingleShootingProblem
+    controller = BENCH.build_controller("nmpc", BENCH.configure(["nmpc.solver=rti"]))
+    small = controller.problem
+    unrolled = SingleShootingProblem(small.predict, small.settings, controller.bounds, small.solvers)
+    rng = np.random.default_rng(2)
+    n_p = small.rti.size1_in(1)
+    for _ in range(5):
+        w, p = rng.uniform(1.0, 6.0, small.horizon), rng.normal(size=n_p) * 0.1
+        a, b = (np.asarray(f(w, p)[0]) for f in (small.rti, unrolled.rti))
+        assert np.max(np.abs(a - b)) <= 1e-9

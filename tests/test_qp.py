@@ -7,7 +7,7 @@ import pytest
 import scipy.sparse as sp
 
 from hystmpc.mpc.qp import interior_point_qp
-from hystmpc.mpc.rti import CompilerNotFound, c_compiler, compile_function, gauss_newton_step
+from hystmpc.mpc.rti import CompilerNotFound, c_compiler, compile_function, gauss_newton_step, rti_steps
 
 N = 10
 RATES = np.eye(N) - np.eye(N, k=-1)
@@ -138,4 +138,32 @@ def test_daqp_step_reports_a_qp_it_could_not_solve():
     H, g, l, u, _ = _random_problem(np.random.default_rng(5))
     step = _qp_as_gauss_newton_step("daqp")(l, u)
     _, qp_error = step(np.zeros(N), np.r_[H.ravel(order="F"), g * np.nan])
-    assert not float(qp_error) <= 1e-6  # NaN or large: either way the controller counts a failure
+    assert float(qp_error) == np.inf
+    _, qp_error = step(np.zeros(N), np.r_[(-H).ravel(order="F"), g])  # not convex: DAQP's setup fails
+    assert float(qp_error) > 1e-6
+    w, worst = rti_steps(step, np.zeros(N), np.r_[H.ravel(order="F"), g * np.nan], iterations=3)
+    assert worst == np.inf and not np.all(np.isfinite(w))  # ends at the first NaN: no NaN bounds for the QP
+
+
+def test_compiled_daqp_step_equals_the_in_process_one_and_never_aborts(tmp_path):
+    """CasADi's generated DAQP call made the whole function fail on a QP it did not solve to
+    optimality; patched, it returns what DAQP gives and leaves the verdict to ``qp_error``."""
+    H, g, l, u, du = _random_problem(np.random.default_rng(6))
+    step = _qp_as_gauss_newton_step("daqp")(l, u)
+    compiled = compile_function(step, tmp_path)
+    p = np.r_[H.ravel(order="F"), g]
+    assert np.array_equal(np.asarray(compiled(np.zeros(N), p)[0]), np.asarray(step(np.zeros(N), p)[0]))
+    for bad in (np.r_[(-H).ravel(order="F"), g], np.r_[H.ravel(order="F"), g * np.nan]):
+        _, qp_error = compiled(np.zeros(N), bad)
+        assert not float(qp_error) <= 1e-6
+
+
+def test_rti_settings_refuse_what_the_step_would_not_use():
+    from hystmpc.mpc.settings import RtiSettings
+    with pytest.raises(ValueError, match="qp_iterations=12 applies to solver.rti.qp=ipm only"):
+        RtiSettings(qp_iterations=12).check_step(condensed=True)
+    RtiSettings(qp="ipm", qp_iterations=12).check_step(condensed=True)
+    with pytest.raises(ValueError, match="qp=ipm needs solver.rti.condensed=true"):
+        RtiSettings(qp="ipm").check_step(condensed=False)
+    with pytest.raises(ValueError, match="qp must be one of daqp, ipm"):
+        RtiSettings(qp="qrqp")
