@@ -150,7 +150,7 @@ class RtiSettings:
                              f"(qp is {self.qp})")
         if self.qp == "ipm" and not condensed:
             raise ValueError("solver.rti.qp=ipm needs solver.rti.condensed=true: the step over states and inputs "
-                             "has unbounded states and solves with qrqp")
+                             "has unbounded states and solves with qrqp (set solver.rti.qp=daqp with it)")
 
     def __post_init__(self):
         if self.qp not in ("daqp", "ipm"):
