@@ -72,6 +72,8 @@ class Bench:
     """Also plot the error against the reference (katalenic2013 Figs. 11–13 style)."""
     fixed: dict[str, str] = field(default_factory=dict)
     """Keys of the groups that cannot be set on this bench, with the reason."""
+    sensor_units: tuple[tuple[str, str], ...] = ()
+    """Units of the sensors other than the tracked output, ``((name, units), ...)``."""
     source: str = ""
     """Where the bench comes from when it is not built in: an actuator file's path, or a
     plugin's entry point (``module:attribute``); :func:`hystmpc.experiments.benches.get_bench`
@@ -85,7 +87,8 @@ class Bench:
     @property
     def labels(self) -> Labels:
         """Names and units of the bench's signals."""
-        return Labels(self.output_name, self.units, self.input_units, self.loop, f"{self.name}: {self.description}")
+        return Labels(self.output_name, self.units, self.input_units, self.loop, f"{self.name}: {self.description}",
+                      self.sensor_units)
 
     def configure(self, assignments=()) -> dict[str, Any]:
         """The default configuration with ``KEY=VALUE`` assignments applied (``ValueError``

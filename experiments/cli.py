@@ -329,6 +329,18 @@ def _codegen(args) -> int:
     _write_json_target(report, json_target)
     if not args.quiet and json_target != "-":
         print(f"C solver written and built in {out}: {', '.join(report['files'])}")
+        ctrl = report["controller"]
+        if "skipped" in ctrl:
+            print(f"whole controller not generated: {ctrl['skipped']}")
+        else:
+            print(f"whole controller (estimator, warm start, solver, fallback) in {ctrl['folder']}: {ctrl['name']}.h "
+                  f"documents the interface; example loop {ctrl['name']}_main")
+        if args.verify and "verify" in ctrl:
+            v = ctrl["verify"]
+            loop = v["example_loop"]
+            print(f"controller verify on {v['scenario']}: largest input difference Python vs C controller "
+                  f"{v['max_input_difference']:.3g}; example loop: feedback {loop['step_median_us']:.0f} µs median, "
+                  f"{loop['step_p95_us']:.0f} µs p95, prepare {loop['prepare_median_us']:.0f} µs median")
         if args.verify:
             c = report["standalone"]
             print(f"verify on {report['scenario']} ({report['samples']} samples): largest input difference "

@@ -1,5 +1,8 @@
 """Real time: code-generated RTI solvers (``hystmpc codegen``) and speed per variant (``hystmpc speed``).
 
+``codegen`` also writes the whole controller where the bench's controller allows it
+(:mod:`hystmpc.experiments.firmware`, in ``<out>/controller``).
+
 The RTI step of a bench's NMPC (:mod:`hystmpc.mpc.rti`) is written as C99 (needs libm and,
 with the default QP, the DAQP library that CasADi ships), with a header, a small C ``main``
 that replays recorded solver inputs without Python, and a Makefile. It is compiled with the
@@ -21,6 +24,7 @@ import casadi as ca
 import numpy as np
 
 from hystmpc.experiments.bench import Bench
+from hystmpc.experiments.firmware import verify_controller, write_controller
 from hystmpc.mpc.rti import COMPILE_FLAGS, _accept_last_qp_iterate, c_compiler, library_flags
 
 MAIN_C = r"""/* Replays recorded RTI inputs through rti_step without Python; prints timings.
@@ -182,8 +186,16 @@ def codegen(bench: Bench, config: dict, out: Path, verify: bool, duration: float
     scenario closed loop with both solvers and run the standalone program on its inputs."""
     compiled = write_solver(bench, config, out)
     report = {"bench": bench.name, "out": str(out), "files": sorted(p.name for p in out.iterdir())}
+    try:
+        report["controller"] = write_controller(bench, config, out / "controller")
+    except ValueError as exc:  # this bench's controller has parts without a CasADi form yet
+        shutil.rmtree(out / "controller", ignore_errors=True)
+        report["controller"] = {"skipped": str(exc)}
     if not verify:
         return report
+    if "skipped" not in report["controller"]:
+        report["controller"]["verify"] = verify_controller(bench, config, out / "controller",
+                                                           report["controller"]["name"], duration)
     scenario = bench.scenarios[bench.default_scenario]
     config = _rti_config(bench, config, "rti")
     results, recorded = {}, None
@@ -227,6 +239,8 @@ def speed(bench: Bench, config: dict, variants, duration: float | None = None, o
     if "rti-c" in variants and out is not None:
         report = codegen(bench, config, out, verify=True, duration=duration)
         result["standalone_c"] = report["standalone"]
+        if "verify" in report["controller"]:
+            result["controller_c"] = report["controller"]["verify"]["example_loop"]
     return result
 
 
@@ -245,4 +259,12 @@ def speed_table(result: dict) -> str:
         c = result["standalone_c"]
         lines.append(f"| rti-c, standalone C program | – | – | {c['median_us'] / 1e3:.3f} / {c['p95_us'] / 1e3:.3f} / "
                      f"{c['max_us'] / 1e3:.3f} | {100 * c['median_us'] / 1e3 / period:.1f} % | – |")
+    if "controller_c" in result:
+        c = result["controller_c"]
+        lines.append(f"| whole controller in C (estimator included), feedback latency | – | – | "
+                     f"{c['step_median_us'] / 1e3:.3f} / {c['step_p95_us'] / 1e3:.3f} / {c['step_max_us'] / 1e3:.3f} "
+                     f"| {100 * c['step_median_us'] / 1e3 / period:.1f} % | {c['failures']:.0f} |")
+        lines.append(f"| whole controller in C, prepare (after the input is sent) | – | – | "
+                     f"{c['prepare_median_us'] / 1e3:.3f} / {c['prepare_p95_us'] / 1e3:.3f} / "
+                     f"{c['prepare_max_us'] / 1e3:.3f} | {100 * c['prepare_median_us'] / 1e3 / period:.1f} % | – |")
     return "\n".join(lines)

@@ -67,6 +67,8 @@ class Labels:
     """Hysteresis-loop plot: (truth key on x, truth key on y, x label, y label)."""
     title: str = ""
     """Figure title."""
+    sensor_units: tuple[tuple[str, str], ...] = ()
+    """Units of the other sensors, ``((name, units), ...)`` (for the generated controller's header)."""
 
 
 @dataclass

@@ -80,6 +80,12 @@ def symbolic(value) -> bool:
     return isinstance(value, (ca.SX, ca.MX))
 
 
+def clip(value, lower, upper):
+    """``numpy.clip`` on CasADi expressions: a NaN stays NaN (``fmin``/``fmax`` would return a
+    bound), so code generated from a model fails where the NumPy model does."""
+    return ca.if_else(value < lower, lower, ca.if_else(value > upper, upper, value))
+
+
 def smooth_function(name: str, n_state: int, expressions) -> ca.Function:
     """``(state, u) -> (state_next, y)`` from ``expressions(state, u) -> (state_next, y)`` on SX symbols.
 

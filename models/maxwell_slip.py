@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from hystmpc.models.base import SteppedModel, check_smoothing, smooth_function, symbolic
+from hystmpc.models.base import SteppedModel, check_smoothing, clip, smooth_function, symbolic
 from hystmpc.models.smooth import smooth_clip
 
 
@@ -72,7 +72,8 @@ class MaxwellSlip(SteppedModel):
         return float(np.sum(np.asarray(state)[1:]))
 
     def step(self, state, u: float) -> tuple[np.ndarray, float]:
-        """Exact step: move the input to ``u``; return the new state and the output.
+        """Exact step: move the input to ``u``; return the new state and the output (NumPy,
+        or CasADi expressions when ``state`` or ``u`` is one).
 
         Parameters
         ----------
@@ -81,9 +82,12 @@ class MaxwellSlip(SteppedModel):
         u : float
             New input.
         """
-        state = np.asarray(state, float)
         k = np.asarray(self.k)
         w = np.asarray(self.w)
+        if symbolic(state) or symbolic(u):  # the same clip, for a generated controller's inverse model
+            forces = clip(state[1:] + ca.DM(k) * (u - state[0]), ca.DM(-w), ca.DM(w))
+            return ca.vertcat(u, forces), ca.sum1(forces)
+        state = np.asarray(state, float)
         forces = np.clip(state[1:] + k * (u - state[0]), -w, w)
         return np.concatenate(([u], forces)), float(forces.sum())
 

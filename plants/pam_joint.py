@@ -22,6 +22,7 @@ from dataclasses import dataclass, field, replace
 import casadi as ca
 import numpy as np
 
+from hystmpc.models.base import clip, symbolic
 from hystmpc.models.integrators import rk4
 from hystmpc.models.maxwell_slip import MaxwellSlip
 from hystmpc.models.prediction import Dynamics, PredictionModel, build_prediction_model
@@ -173,22 +174,37 @@ def prediction_model(p: PamJointParams, eps: float, direction_eps: float | None 
                                   delay_samples=p.delay_samples, substeps=substeps, name="pam")
 
 
-def inverse_inputs(p: PamJointParams, x, d, refs) -> np.ndarray:
+def inverse_inputs(p: PamJointParams, x, d, refs):
     """Static inverse along the reference: Δp_cons(r) + Δp_hys(path) − d/a(r), eqs. (2)–(3),
-    from the state ``x`` of :func:`prediction_model`.
+    from the state ``x`` of :func:`prediction_model` (NumPy, or CasADi expressions for a
+    generated controller).
 
     The command reaches the pressure ``D`` samples later, so input ``j`` aims at ``r_{j+D}``.
     """
     D, M = p.delay_samples, p.hysteresis.n_elements
-    refs = np.asarray(refs, float)
-    n = len(refs)
-    hys = np.concatenate(([x[0]], np.clip(x[4: 4 + M], -np.asarray(p.hysteresis.w), np.asarray(p.hysteresis.w))))
-    need = np.empty(n)
+    w = np.asarray(p.hysteresis.w)
+    if symbolic(x):
+        xp, n = ca, refs.shape[0]
+        hys = ca.vertcat(x[0], clip(x[4: 4 + M], ca.DM(-w), ca.DM(w)))
+    else:
+        refs = np.asarray(refs, float)
+        xp, n = np, len(refs)
+        hys = np.concatenate(([x[0]], np.clip(x[4: 4 + M], -w, w)))
+    need = []
     for j in range(n):
         r = refs[min(j + D, n - 1)]
         hys, dp_hys = p.hysteresis.step(hys, r)
-        need[j] = constraint_pressure(p, r) + dp_hys - float(d[0]) / torque_slope(p, r)
-    return need
+        need.append(constraint_pressure(p, r, xp) + dp_hys - d[0] / torque_slope(p, r, xp))
+    return ca.vertcat(*need) if xp is ca else np.array(need, float)
+
+
+def rest_state(p: PamJointParams, z):
+    """State of :func:`prediction_model` at rest from the sensor vector ``[θ, Δp]``: relaxed
+    hysteresis, an empty delay line (NumPy, or CasADi expressions)."""
+    D, M = p.delay_samples, p.hysteresis.n_elements
+    if symbolic(z):
+        return ca.vertcat(z[0], 0.0, z[1], 0.0, ca.DM.zeros(M + D))
+    return np.concatenate(([z[0], 0.0, z[1], 0.0], np.zeros(M + D)))
 
 
 def linear_model(p: PamJointParams, substeps: int = 2) -> PredictionModel:

@@ -26,6 +26,7 @@ from hystmpc.plants.pam_joint import (
     linear_model,
     perturbed_hysteresis,
     prediction_model,
+    rest_state,
     static_compensation,
 )
 
@@ -92,7 +93,7 @@ def build_nmpc(config: dict) -> NmpcController:
     quantum = 360.0 / model.encoder_counts
     ekf = DisturbanceEKF(pm, q_noise, [quantum**2 / 12 + 1e-6, model.pressure_noise_bar**2 + 1e-6])
     p0 = [1e-3, 1.0, 1e-3, 1.0] + [1e-4] * M + [1e-12] * D + [0.1]
-    observer = StateObserver(pm, ekf, lambda z: np.concatenate(([z[0], 0.0, z[1], 0.0], np.zeros(M + D))), p0)
+    observer = StateObserver(pm, ekf, lambda z: rest_state(model, z), p0)
     bounds = InputBounds(-model.dp_limit, model.dp_limit, model.pressure_slew * model.sample_period)
     return NmpcController(pm, bounds, config["nmpc"], config["solver"], observer=observer,
                           inverse=lambda est, refs: inverse_inputs(model, est.x, est.d, refs), jump_threshold=1.0)
@@ -155,6 +156,7 @@ BENCH = Bench(
     output_name="angle",
     units="deg",
     input_units="bar",
+    sensor_units=(("pressure", "bar, the measured pressure difference"),),
     sample_period=NOMINAL.sample_period,
     scenarios={s.name: s for s in [_square(a) for a in (10, 20, 30, 40)] + [_sine(30)]},
     controllers={

@@ -1,0 +1,102 @@
+"""The whole controller as CasADi Functions (mpc.embedded) and as generated C (experiments.firmware)."""
+
+import json
+from dataclasses import replace
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from hystmpc.experiments.benches import get_bench
+from hystmpc.experiments.cli import main
+from hystmpc.mpc.embedded import FunctionController, MemoryLayout, controller_functions, feasible_guess_expr
+from hystmpc.mpc.rti import feasible_guess
+from hystmpc.plants.base import Measurement
+
+
+def _pam(*assignments):
+    bench = get_bench("pam")
+    config = bench.configure(["nmpc.solver=rti", *assignments])
+    return bench, config
+
+
+def test_the_functions_repeat_the_python_controller_on_pam():
+    bench, config = _pam()
+    scenario = bench.scenarios[bench.default_scenario]
+    python = bench.run(scenario, "nmpc", config, duration=4.0)
+    prepared = bench.prepare(scenario, "nmpc", config)
+    functions = FunctionController(prepared.controller, *controller_functions(prepared.controller))
+    generated = bench.run(scenario, "nmpc", duration=4.0, prepared=replace(prepared, controller=functions))
+    assert np.max(np.abs(python.input - generated.input)) <= 1e-9
+    assert np.max(np.abs(python.predicted[1:] - generated.predicted[1:])) <= 1e-9
+    assert functions.stats()["failures"] == python.solver["failures"]
+
+
+def test_failures_and_lost_estimates_take_the_python_controllers_fallbacks():
+    """A NaN sensor restarts the estimate (status 2), a QP that cannot converge is a failure
+    (status 1): both send the same finite, bounded input as the Python controller."""
+    bench, config = _pam("solver.rti.qp=ipm", "solver.rti.qp_iterations=10")  # 10 IPM iterations often fail
+    python = bench.build_controller("nmpc", config)
+    functions = FunctionController(python, *controller_functions(python))
+    python.reset()
+    rng = np.random.default_rng(3)
+    window = np.full(python.horizon + 1, 20.0)
+    u_py, u_fn = [], []
+    for k in range(60):
+        angle = 20.0 * (1 - np.exp(-k / 15)) + rng.normal(0, 0.05)
+        meas = Measurement(t=0.02 * k, y=np.nan if k == 30 else angle, sensors={"pressure": 2.0 + 0.01 * k})
+        u_py.append(python.step(meas, window))
+        u_fn.append(functions.step(meas, window))
+    # the restart at the NaN sample starts from the NaN sensor, so the next sample restarts again
+    assert python.estimator_resets == 2 and functions.statuses.get(2) == 2
+    assert python.failures > 1 and functions.stats()["failures"] == python.failures
+    assert np.all(np.isfinite(u_fn)) and np.max(np.abs(np.diff(u_fn))) <= python.bounds.rate + 1e-12
+    np.testing.assert_allclose(u_fn, u_py, rtol=0, atol=1e-9)
+
+
+def test_the_rate_feasible_guess_is_the_same_expression():
+    u = ca.MX.sym("u", 6)
+    f = ca.Function("f", [u], [feasible_guess_expr(u, 0.3, -1.0, 1.0, 0.25)])
+    guess = np.array([2.0, -2.0, 0.9, 0.1, -0.5, 0.7])
+    np.testing.assert_array_equal(np.asarray(f(guess)).ravel(), feasible_guess(guess, 0.3, -1.0, 1.0, 0.25))
+
+
+def test_memory_layout_packs_the_named_parts_in_order():
+    layout = MemoryLayout(nx=3, nd=1, horizon=4)
+    assert layout.size == 3 + 1 + 16 + 1 + 1 + 4 + 1 + 1 + 1 + 1 + 1
+    mem = ca.MX.sym("mem", layout.size)
+    f = ca.Function("f", [mem], [layout.pack(mem, u_last=7.0, plan=ca.DM([1, 2, 3, 4]))])
+    out = np.asarray(f(np.zeros(layout.size))).ravel()
+    assert out[layout.slices["u_last"]][0] == 7.0 and list(out[layout.slices["plan"]]) == [1, 2, 3, 4]
+    with pytest.raises(ValueError, match="unknown memory parts"):
+        layout.pack(mem, covariance=0)
+
+
+def test_controllers_without_a_casadi_form_are_refused_with_the_reason():
+    for name, reason in (("reluctance", "needs a StateObserver"), ("compliant", "initial_state does not accept")):
+        bench = get_bench(name)
+        controller = bench.build_controller("nmpc", bench.configure(["nmpc.solver=rti"]))
+        with pytest.raises(ValueError, match=reason):
+            controller_functions(controller)
+    bench, config = _pam()
+    with pytest.raises(ValueError, match="build the controller with nmpc.solver=rti"):
+        controller_functions(bench.build_controller("nmpc", bench.configure()))  # rti-c: a compiled step
+
+
+@pytest.mark.slow
+def test_generated_c_controller_drives_the_plant_as_the_python_one(tmp_path):
+    """The whole default scenario: the C controller (through ctypes) against the Python
+    controller, and the example firmware loop on the recorded sensors."""
+    out = tmp_path / "report.json"
+    assert main(["codegen", "pam", "--verify", "--out", str(tmp_path / "c"), "--json", str(out), "--quiet"]) == 0
+    controller = json.loads(out.read_text())["controller"]
+    assert {"pam.h", "pam.c", "pam_nmpc.c", "main.c", "Makefile", "libpam.so", "pam_main"} <= set(controller["files"])
+    verify = controller["verify"]
+    assert verify["samples"] == 1000
+    assert verify["max_input_difference"] <= 1e-9
+    assert verify["example_loop"]["max_input_difference"] <= 1e-9
+    assert verify["failures"]["c"] == verify["failures"]["python"]
+    header = (tmp_path / "c" / "controller" / "pam.h").read_text()
+    for documented in ("int pam_step(", "void pam_prepare(", "void pam_init(", "#define PAM_NZ 2", "#define PAM_N 20",
+                       "y, the measured angle (deg)", "pressure (bar", "u_out: the input to send (bar)"):
+        assert documented in header
