@@ -86,6 +86,16 @@ def clip(value, lower, upper):
     return ca.if_else(value < lower, lower, ca.if_else(value > upper, upper, value))
 
 
+def builtin_max(a, b):
+    """Python's ``max(a, b)`` on CasADi expressions: ``a`` unless ``b > a`` (NaN included)."""
+    return ca.if_else(b > a, b, a)
+
+
+def builtin_min(a, b):
+    """Python's ``min(a, b)`` on CasADi expressions: ``a`` unless ``b < a`` (NaN included)."""
+    return ca.if_else(b < a, b, a)
+
+
 def smooth_function(name: str, n_state: int, expressions) -> ca.Function:
     """``(state, u) -> (state_next, y)`` from ``expressions(state, u) -> (state_next, y)`` on SX symbols.
 

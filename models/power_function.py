@@ -30,7 +30,15 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from hystmpc.models.base import SteppedModel, check_smoothing, smooth_function, symbolic
+from hystmpc.models.base import (
+    SteppedModel,
+    builtin_max,
+    builtin_min,
+    check_smoothing,
+    clip,
+    smooth_function,
+    symbolic,
+)
 from hystmpc.models.smooth import smooth_max, smooth_min
 
 # zhou2024 Table V: (s, τ [N m]); s in the paper's scaled units (see VirtualDeformation).
@@ -62,7 +70,7 @@ def _polyline(points, x, relu):
 
 
 def _exact_relu(x):
-    return np.maximum(x, 0.0)
+    return ca.if_else(x < 0.0, 0.0, x) if symbolic(x) else np.maximum(x, 0.0)
 
 
 @dataclass(frozen=True)
@@ -147,7 +155,11 @@ class PowerFunctionHysteresis(SteppedModel):
     reversal, torque."""
 
     def initial_state(self, s0: float | None = None) -> np.ndarray:
-        """Resting on the ascending polyline at ``s0`` (default: where τ_al = 0)."""
+        """Resting on the ascending polyline at ``s0`` (default: where τ_al = 0); a CasADi
+        ``s0`` gives the state as an expression."""
+        if symbolic(s0):
+            tau = self.tau_ascending(s0)
+            return ca.vertcat(s0, 1.0, s0, s0 - self.delta_s1(s0), tau, tau)
         s0 = float(self.s_ascending(0.0)) if s0 is None else float(s0)
         tau = float(self.tau_ascending(s0))
         return np.array([s0, 1.0, s0, s0 - self.delta_s1(s0), tau, tau])
@@ -168,8 +180,62 @@ class PowerFunctionHysteresis(SteppedModel):
         y = (s01 - min(s, s01)) / (s01 - s02)
         return float(tau_r - (tau_r - self.tau_descending(s02)) * y ** self.exponent(s01))
 
+    def _exponent_expr(self, s0):
+        """:meth:`exponent` (exact) on a CasADi expression, with Python's min and max."""
+        gp, gn = self.exponent_positive, self.exponent_negative
+        b = ca.if_else(s0 > 0, gp[0] * s0**2 + gp[1] * s0 + gp[2], gn[0] * s0**2 + gn[1] * s0 + gn[2])
+        lo, hi = self.exponent_range
+        return builtin_min(builtin_max(b, lo), hi)
+
+    def _step_expr(self, state, s):
+        """:meth:`step` on CasADi expressions: the same comparisons, as ``if_else``."""
+        s_last, up, s01, s02, tau_r, tau_last = (state[i] for i in range(6))
+        was_min = ca.logic_and(s > s_last, up < 0.5)
+        was_max = ca.logic_and(ca.logic_not(was_min), ca.logic_and(s < s_last, up >= 0.5))
+        s02 = ca.if_else(was_min, s_last, ca.if_else(was_max, s_last - self.delta_s1(s_last), s02))
+        s01 = ca.if_else(was_min, s_last + self.delta_s2(s_last), ca.if_else(was_max, s_last, s01))
+        tau_r = ca.if_else(ca.logic_or(was_min, was_max), tau_last, tau_r)
+        up = ca.if_else(was_min, 1.0, ca.if_else(was_max, 0.0, up))
+        x = (builtin_max(s, s02) - s02) / (s01 - s02)
+        up_branch = ca.if_else(s >= s01, self.tau_ascending(s),
+                               tau_r + (self.tau_ascending(s01) - tau_r) * x ** self._exponent_expr(s02))
+        y = (s01 - builtin_min(s, s01)) / (s01 - s02)
+        down_branch = ca.if_else(s <= s02, self.tau_descending(s),
+                                 tau_r - (tau_r - self.tau_descending(s02)) * y ** self._exponent_expr(s01))
+        tau = ca.if_else(s == s_last, tau_last, ca.if_else(up >= 0.5, up_branch, down_branch))
+        return ca.vertcat(s, up, s01, s02, tau_r, tau), tau
+
+    def _inverse_step_expr(self, state, tau):
+        """:meth:`inverse_step` on CasADi expressions (a non-finite ``tau`` gives NaN, not an error)."""
+        s_last, up, s01, s02, tau_r, tau_last = (state[i] for i in range(6))
+        # rising torque
+        s02_up = ca.if_else(up < 0.5, s_last, s02)
+        s01_up = ca.if_else(up < 0.5, s_last + self.delta_s2(s_last), s01)
+        tau_r_up = ca.if_else(up < 0.5, tau_last, tau_r)
+        tau_01 = self.tau_ascending(s01_up)
+        ratio = builtin_min(builtin_max((tau - tau_r_up) / (tau_01 - tau_r_up), 0.0), 1.0)
+        s_rise = ca.if_else(ca.logic_or(tau >= tau_01, tau_01 <= tau_r_up), self.s_ascending(tau),
+                            s02_up + ratio ** (1.0 / self._exponent_expr(s02_up)) * (s01_up - s02_up))
+        # falling torque
+        s01_dn = ca.if_else(up >= 0.5, s_last, s01)
+        s02_dn = ca.if_else(up >= 0.5, s_last - self.delta_s1(s_last), s02)
+        tau_r_dn = ca.if_else(up >= 0.5, tau_last, tau_r)
+        tau_02 = self.tau_descending(s02_dn)
+        ratio = builtin_min(builtin_max((tau_r_dn - tau) / (tau_r_dn - tau_02), 0.0), 1.0)
+        s_fall = ca.if_else(ca.logic_or(tau <= tau_02, tau_02 >= tau_r_dn), self.s_descending(tau),
+                            s01_dn - ratio ** (1.0 / self._exponent_expr(s01_dn)) * (s01_dn - s02_dn))
+        s = ca.if_else(tau > tau_last, s_rise, s_fall)
+        moved, _ = self._step_expr(state, s)
+        unmoved = tau == tau_last
+        s = ca.if_else(unmoved, s_last, s)
+        s = ca.if_else(ca.fabs(tau) < ca.inf, s, np.nan)
+        return ca.if_else(unmoved, state, moved), s
+
     def step(self, state, s: float) -> tuple[np.ndarray, float]:
-        """Exact step to virtual deformation ``s``; returns ``(state, τ)``."""
+        """Exact step to virtual deformation ``s``; returns ``(state, τ)`` (CasADi expressions
+        when ``state`` or ``s`` is one)."""
+        if symbolic(state) or symbolic(s):
+            return self._step_expr(state, s)
         s_last, up, s01, s02, tau_r, tau_last = (float(v) for v in state)
         if s > s_last and up < 0.5:  # s_last was a minimum: eq. (13), then eq. (10)
             s02, s01, tau_r, up = s_last, s_last + self.delta_s2(s_last), tau_last, 1.0
@@ -191,8 +257,11 @@ class PowerFunctionHysteresis(SteppedModel):
         points (eqs. (25)–(26)). The inverse turning points are the forward ones mapped
         through the polylines (τ01 = τ_al(s01), τ02 = τ_dl(s02)) instead of eq. (22)'s
         separately fitted l-parameters, which the paper does not list; this makes
-        ``step(state, inverse_step(state, τ)[1])`` return τ to rounding.
+        ``step(state, inverse_step(state, τ)[1])`` return τ to rounding. CasADi arguments
+        give expressions.
         """
+        if symbolic(state) or symbolic(tau):
+            return self._inverse_step_expr(state, tau)
         if not np.isfinite(tau):
             raise ValueError(f"tau must be finite, got {tau}")
         s_last, up, s01, s02, tau_r, tau_last = (float(v) for v in state)
@@ -297,7 +366,10 @@ class VirtualDeformation:
                              + 2 * self.pretension * r * xp.sin(theta) / k)
 
     def theta(self, s) -> np.ndarray:
-        """Inverse of :meth:`s` on |θ1| < π/2 (s is odd and increasing there), by Newton steps."""
+        """Inverse of :meth:`s` on |θ1| < π/2 (s is odd and increasing there), by Newton steps
+        (for a CasADi ``s``: the same steps as an expression, through :meth:`theta_function`)."""
+        if symbolic(s):
+            return ca.vertcat(*[self.theta_function()(s[i]) for i in range(s.numel())])
         s = np.asarray(s, float)
         theta = s / (self.scale * 2 * self.pretension * self.pinion_radius / self.stiffness)
         theta = np.clip(theta, -1.2, 1.2)
@@ -310,3 +382,18 @@ class VirtualDeformation:
             if np.max(np.abs(step)) < 1e-15:
                 break
         return theta
+
+    def theta_function(self) -> ca.Function:
+        """``theta(s)`` for a scalar as a CasADi Function: the 50 Newton steps of :meth:`theta`
+        unrolled, each applied only until one is below 1e-15 (as the loop's ``break``)."""
+        s = ca.SX.sym("s")
+        r, k = self.pinion_radius, self.stiffness
+        theta = clip(s / (self.scale * 2 * self.pretension * r / k), -1.2, 1.2)
+        done = ca.SX(0)
+        for _ in range(50):
+            ds = self.scale * (4 * r**2 * (ca.cos(theta) - ca.cos(2 * theta))
+                               + 2 * self.pretension * r * ca.cos(theta) / k)
+            step = (self.s(theta, ca) - s) / ds
+            theta = ca.if_else(done, theta, clip(theta - step, -1.5, 1.5))
+            done = ca.logic_or(done, ca.fabs(step) < 1e-15)
+        return ca.Function("virtual_deformation_theta", [s], [theta])

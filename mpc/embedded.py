@@ -141,8 +141,7 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     u_last = part("u_last")
 
     # prepare: the time update with the input just sent
-    xd_next, A = ekf._predict(part("x"), u_last, part("d"))
-    P_next = A @ P_mem @ A.T + ca.DM(ekf.Q)
+    xd_next, P_next = ekf.time_update(part("x"), u_last, part("d"), P_mem, ca.DM(ekf.Q))
     prepare = ca.Function(f"{name}_prepare", [mem], [layout.pack(
         mem, x=ca.if_else(started, xd_next[:nx], part("x")), d=ca.if_else(started, xd_next[nx:], part("d")),
         P=ca.if_else(started, P_next, P_mem))], ["mem"], ["mem_next"])
@@ -155,13 +154,7 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     xd = ca.if_else(started, ca.vertcat(part("x"), part("d")), x_rest)
     P = ca.if_else(started, P_mem, P_rest)
     predicted = model.output(xd[:nx], xd[nx:])
-    z_pred, C = ekf._measure(xd[:nx], xd[nx:])
-    R = ca.DM(ekf.R)
-    S = C @ P @ C.T + R
-    K = ca.solve(S, C @ P, "qr").T
-    xd_update = xd + K @ (z - z_pred)
-    I_KC = ca.DM.eye(n) - K @ C
-    P_update = I_KC @ P @ I_KC.T + K @ R @ K.T  # Joseph form, as DisturbanceEKF.update
+    xd_update, P_update = ekf.measurement_update(xd[:nx], xd[nx:], P, z)
     lost = ca.logic_not(_finite(xd_update))
     xd = ca.if_else(lost, x_rest, xd_update)
     P = ca.if_else(lost, P_rest, P_update)

@@ -38,9 +38,33 @@ class DisturbanceEKF:
         self._predict = ca.Function("ekf_predict", [x, u, d], [z_next, ca.jacobian(z_next, z)])
         meas = model.measure(x, d)
         self._measure = ca.Function("ekf_measure", [x, d], [meas, ca.jacobian(meas, z)])
+        self.time_update, self.measurement_update = self._update_functions()
         self.x = np.zeros(nx)
         self.d = np.zeros(nd)
         self.P = np.eye(nx + nd)
+
+    def _update_functions(self) -> tuple[ca.Function, ca.Function]:
+        """The time and measurement updates as CasADi Functions (matrix products as loops):
+        the Python filter and the generated controller (:mod:`hystmpc.mpc.embedded`) call the
+        same ones, so they round alike. ``Q`` is an argument: an observer may change it."""
+        nx, nd, nz = self.model.nx, self.model.nd, self.model.nz
+        x, u, d = ca.MX.sym("x", nx), ca.MX.sym("u", self.model.nu), ca.MX.sym("d", nd)
+        P, Q = ca.MX.sym("P", nx + nd, nx + nd), ca.MX.sym("Q", nx + nd, nx + nd)
+        xd_next, A = self._predict(x, u, d)
+        time_update = ca.Function("ekf_time_update", [x, u, d, P, Q], [xd_next, A @ P @ A.T + Q],
+                                  ["x", "u", "d", "P", "Q"], ["xd_next", "P_next"])
+        z = ca.MX.sym("z", nz)
+        xd, P_next = ca.vertcat(x, d), P
+        if nz:
+            z_pred, C = self._measure(x, d)
+            R = ca.DM(self.R)
+            K = ca.solve(C @ P @ C.T + R, C @ P, "qr").T
+            xd = xd + K @ (z - z_pred)
+            I_KC = ca.DM.eye(nx + nd) - K @ C
+            P_next = I_KC @ P @ I_KC.T + K @ R @ K.T  # Joseph form: stays symmetric PSD
+        measurement_update = ca.Function("ekf_measurement_update", [x, d, P, z], [xd, P_next],
+                                         ["x", "d", "P", "z"], ["xd_next", "P_next"])
+        return time_update, measurement_update
 
     def reset(self, x0, d0, P0) -> None:
         """Set the estimate and its covariance (diagonal ``P0``)."""
@@ -50,23 +74,15 @@ class DisturbanceEKF:
 
     def predict(self, u) -> None:
         """Time update with the applied input ``u``."""
-        z_next, A = self._predict(self.x, u, self.d)
+        z_next, P = self.time_update(self.x, u, self.d, self.P, self.Q)
         z_next = np.asarray(z_next).ravel()
-        A = np.asarray(A)
-        self.x, self.d = z_next[: self.model.nx], z_next[self.model.nx:]
-        self.P = A @ self.P @ A.T + self.Q
+        self.x, self.d, self.P = z_next[: self.model.nx], z_next[self.model.nx:], np.asarray(P)
 
     def update(self, z_meas) -> None:
         """Measurement update with the sensor vector ``z_meas``."""
-        z_pred, C = self._measure(self.x, self.d)
-        C = np.asarray(C)
-        innovation = np.asarray(z_meas, float) - np.asarray(z_pred).ravel()
-        S = C @ self.P @ C.T + self.R
-        K = np.linalg.solve(S, C @ self.P).T
-        z = np.concatenate((self.x, self.d)) + K @ innovation
-        I_KC = np.eye(len(z)) - K @ C
-        self.P = I_KC @ self.P @ I_KC.T + K @ self.R @ K.T  # Joseph form: stays symmetric PSD
-        self.x, self.d = z[: self.model.nx], z[self.model.nx:]
+        z, P = self.measurement_update(self.x, self.d, self.P, np.asarray(z_meas, float))
+        z = np.asarray(z).ravel()
+        self.x, self.d, self.P = z[: self.model.nx], z[self.model.nx:], np.asarray(P)
 
     @classmethod
     def from_sensor_noise(cls, model: PredictionModel, sensor_noise) -> tuple[DisturbanceEKF, np.ndarray]:

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from hystmpc.models.base import clip, symbolic
 from hystmpc.models.integrators import rk4
 from hystmpc.models.power_function import PowerFunctionHysteresis, VirtualDeformation
 from hystmpc.models.prediction import Dynamics, PredictionModel, build_prediction_model
@@ -141,10 +142,19 @@ def prediction_model(p: CompliantParams, eps: float, substeps: int = 2,
                                   delay_samples=p.command_delay, substeps=substeps, name="compliant")
 
 
-def inverse_inputs(p: CompliantParams, x, d, refs) -> np.ndarray:
+def inverse_inputs(p: CompliantParams, x, d, refs):
     """Motor angles that the inverse model gives for ``refs − d`` from the state ``x`` of
-    :func:`prediction_model`."""
+    :func:`prediction_model` (NumPy, or CasADi expressions for a generated controller)."""
     hys: PowerFunctionHysteresis = p.hysteresis
+    if symbolic(x):
+        st, tau = ca.SX.sym("state", 6), ca.SX.sym("tau")  # one Function called per sample: small C
+        inverse_step = ca.Function("power_function_inverse_step", [st, tau], [*hys.inverse_step(st, tau)])
+        state = ca.vertcat(x[2], ca.if_else(x[3] >= 0.5, 1.0, 0.0), x[4:8])
+        s_seq = []
+        for j in range(refs.shape[0]):
+            state, s = inverse_step(state, refs[j] - d[0])
+            s_seq.append(s)
+        return clip(p.geometry.theta(ca.vertcat(*s_seq)), -p.angle_limit, p.angle_limit)
     state = np.asarray(x[2:8], float).copy()
     state[1] = 1.0 if state[1] >= 0.5 else 0.0
     out = np.empty(len(refs))
@@ -154,8 +164,12 @@ def inverse_inputs(p: CompliantParams, x, d, refs) -> np.ndarray:
     return np.clip(out, -p.angle_limit, p.angle_limit)
 
 
-def initial_state(p: CompliantParams, z) -> np.ndarray:
-    """Model state at rest from the first sensor vector ``[motor angle, torque]``."""
+def initial_state(p: CompliantParams, z):
+    """Model state at rest from the first sensor vector ``[motor angle, torque]`` (NumPy, or
+    CasADi expressions)."""
+    if symbolic(z):
+        s = p.geometry.s(z[0], xp=ca)
+        return ca.vertcat(z[0], 0.0, p.hysteresis.initial_state(s), ca.repmat(z[0], p.command_delay, 1))
     s = float(p.geometry.s(z[0]))
     return np.concatenate(([z[0], 0.0], p.hysteresis.initial_state(s), np.full(p.command_delay, z[0])))
 

@@ -73,30 +73,49 @@ def test_memory_layout_packs_the_named_parts_in_order():
 
 
 def test_controllers_without_a_casadi_form_are_refused_with_the_reason():
-    for name, reason in (("reluctance", "needs a StateObserver"), ("compliant", "initial_state does not accept")):
-        bench = get_bench(name)
-        controller = bench.build_controller("nmpc", bench.configure(["nmpc.solver=rti"]))
-        with pytest.raises(ValueError, match=reason):
-            controller_functions(controller)
+    bench = get_bench("reluctance")
+    with pytest.raises(ValueError, match="needs a StateObserver"):
+        controller_functions(bench.build_controller("nmpc", bench.configure(["nmpc.solver=rti"])))
     bench, config = _pam()
+    numpy_only = bench.build_controller("nmpc", config)
+    numpy_only.observer.initial_state = lambda z: np.concatenate(([float(z[0])], np.zeros(numpy_only.model.nx - 1)))
+    with pytest.raises(ValueError, match="initial_state does not accept CasADi expressions"):
+        controller_functions(numpy_only)
     with pytest.raises(ValueError, match="build the controller with nmpc.solver=rti"):
         controller_functions(bench.build_controller("nmpc", bench.configure()))  # rti-c: a compiled step
 
 
+def test_the_functions_repeat_the_python_controller_on_compliant():
+    """compliant's inverse (power-function turning points, Newton steps for θ(s)) as expressions."""
+    bench = get_bench("compliant")
+    config = bench.configure(["nmpc.solver=rti"])
+    scenario = bench.scenarios["sine-2"]
+    python = bench.run(scenario, "nmpc", config, duration=2.0)
+    prepared = bench.prepare(scenario, "nmpc", config)
+    functions = FunctionController(prepared.controller, *controller_functions(prepared.controller))
+    generated = bench.run(scenario, "nmpc", duration=2.0, prepared=replace(prepared, controller=functions))
+    assert np.max(np.abs(python.input - generated.input)) <= 1e-9
+
+
 @pytest.mark.slow
-def test_generated_c_controller_drives_the_plant_as_the_python_one(tmp_path):
+@pytest.mark.parametrize(("bench_name", "samples", "sensors"), [
+    ("pam", 1000, ("#define PAM_NZ 2", "y, the measured angle (deg)", "pressure (bar", "the input to send (bar)")),
+    ("compliant", 2000, ("#define COMPLIANT_NZ 2", "angle (rad", "y, the measured torque (N m)")),
+])
+def test_generated_c_controller_drives_the_plant_as_the_python_one(tmp_path, bench_name, samples, sensors):
     """The whole default scenario: the C controller (through ctypes) against the Python
     controller, and the example firmware loop on the recorded sensors."""
     out = tmp_path / "report.json"
-    assert main(["codegen", "pam", "--verify", "--out", str(tmp_path / "c"), "--json", str(out), "--quiet"]) == 0
+    assert main(["codegen", bench_name, "--verify", "--out", str(tmp_path / "c"), "--json", str(out), "--quiet"]) == 0
     controller = json.loads(out.read_text())["controller"]
-    assert {"pam.h", "pam.c", "pam_nmpc.c", "main.c", "Makefile", "libpam.so", "pam_main"} <= set(controller["files"])
+    name = bench_name
+    assert {f"{name}.h", f"{name}.c", f"{name}_nmpc.c", "main.c", "Makefile", f"lib{name}.so",
+            f"{name}_main"} <= set(controller["files"])
     verify = controller["verify"]
-    assert verify["samples"] == 1000
+    assert verify["samples"] == samples
     assert verify["max_input_difference"] <= 1e-9
     assert verify["example_loop"]["max_input_difference"] <= 1e-9
     assert verify["failures"]["c"] == verify["failures"]["python"]
-    header = (tmp_path / "c" / "controller" / "pam.h").read_text()
-    for documented in ("int pam_step(", "void pam_prepare(", "void pam_init(", "#define PAM_NZ 2", "#define PAM_N 20",
-                       "y, the measured angle (deg)", "pressure (bar", "u_out: the input to send (bar)"):
+    header = (tmp_path / "c" / "controller" / f"{name}.h").read_text()
+    for documented in (f"int {name}_step(", f"void {name}_prepare(", f"void {name}_init(", *sensors):
         assert documented in header

@@ -133,6 +133,7 @@ BENCH = Bench(
     output_name="torque",
     units="N m",
     input_units="rad",
+    sensor_units=(("angle", "rad, the measured motor angle θ1"),),
     sample_period=NOMINAL.sample_period,
     scenarios={s.name: s for s in (_sine(0.5), _sine(1.0), _sine(2.0))},
     controllers={
