@@ -25,6 +25,7 @@ import numpy as np
 
 from hystmpc.experiments.bench import Bench
 from hystmpc.experiments.firmware import verify_controller, write_controller
+from hystmpc.mpc.embedded import NotGeneratable
 from hystmpc.mpc.rti import COMPILE_FLAGS, _accept_last_qp_iterate, c_compiler, library_flags
 
 MAIN_C = r"""/* Replays recorded RTI inputs through rti_step without Python; prints timings.
@@ -188,7 +189,7 @@ def codegen(bench: Bench, config: dict, out: Path, verify: bool, duration: float
     report = {"bench": bench.name, "out": str(out), "files": sorted(p.name for p in out.iterdir())}
     try:
         report["controller"] = write_controller(bench, config, out / "controller")
-    except ValueError as exc:  # this bench's controller has parts without a CasADi form yet
+    except NotGeneratable as exc:  # this bench's controller has parts without a CasADi form yet
         shutil.rmtree(out / "controller", ignore_errors=True)
         report["controller"] = {"skipped": str(exc)}
     if not verify:

@@ -86,6 +86,20 @@ def clip(value, lower, upper):
     return ca.if_else(value < lower, lower, ca.if_else(value > upper, upper, value))
 
 
+def interp(x, xp, fp):
+    """``numpy.interp(x, xp, fp)`` for NumPy values, and for a CasADi ``x`` the same formula
+    (the segment's slope times the distance from its left point, plus that point's value; the
+    end values held outside), as nested ``if_else``."""
+    if not symbolic(x):
+        return np.interp(x, xp, fp)
+    xp, fp = np.asarray(xp, float), np.asarray(fp, float)
+    slopes = (fp[1:] - fp[:-1]) / (xp[1:] - xp[:-1])
+    value = ca.if_else(x >= xp[-1], fp[-1], x * np.nan)  # x >= the last point, or NaN
+    for j in range(len(xp) - 2, -1, -1):
+        value = ca.if_else(x < xp[j + 1], slopes[j] * (x - xp[j]) + fp[j], value)
+    return ca.if_else(x < xp[0], fp[0], value)
+
+
 def builtin_max(a, b):
     """Python's ``max(a, b)`` on CasADi expressions: ``a`` unless ``b > a`` (NaN included)."""
     return ca.if_else(b > a, b, a)

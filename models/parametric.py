@@ -57,6 +57,11 @@ class ParametricHysteresis(SteppedModel):
 
     @staticmethod
     def _update_memory(state, u):
+        if symbolic(state) or symbolic(u):  # the same tests as if_else
+            u_last, s, u0, v0, v_last = (state[i] for i in range(5))
+            direction = ca.if_else(u > u_last, 1.0, -1.0)
+            turned = ca.logic_and(u != u_last, direction != s)  # u_last was an extremum (Definition 3.1)
+            return ca.if_else(turned, direction, s), ca.if_else(turned, u_last, u0), ca.if_else(turned, v_last, v0)
         u_last, s, u0, v0, v_last = (float(v) for v in state)
         if u != u_last:
             direction = 1.0 if u > u_last else -1.0
@@ -80,8 +85,12 @@ class ParametricHysteresis(SteppedModel):
         return u - u0 + v0 + s * m * (1 - lib.exp(-self.p2 * du))
 
     def step(self, state, u: float) -> tuple[np.ndarray, float]:
-        """Exact step of H to input ``u``; returns ``(state, v)``."""
+        """Exact step of H to input ``u``; returns ``(state, v)`` (CasADi expressions when
+        ``state`` or ``u`` is one)."""
         s, u0, v0 = self._update_memory(state, u)
+        if symbolic(s):
+            v = self.direct(u if symbolic(u) else type(s)(u), s, u0, v0)
+            return ca.vertcat(u, s, u0, v0, v), v
         v = float(self.direct(u, s, u0, v0))
         return np.array([u, s, u0, v0, v]), v
 
@@ -91,6 +100,12 @@ class ParametricHysteresis(SteppedModel):
         ``state`` is H's state; IH runs on swapped memory (its input is H's output), which
         is what makes the pair exact inverses.
         """
+        if symbolic(state) or symbolic(v_target):  # a non-finite target gives u = NaN
+            u_last, s, u0, v0, v_last = (state[i] for i in range(5))
+            s_i, v0_i, u0_i = self._update_memory(ca.vertcat(v_last, s, v0, u0, u_last), v_target)
+            u = self.inverse(v_target if symbolic(v_target) else type(s_i)(v_target), s_i, v0_i, u0_i)
+            u = ca.if_else(ca.fabs(v_target) < ca.inf, u, np.nan)
+            return self.step(state, u)[0], u
         if not np.isfinite(v_target):
             raise ValueError(f"v_target must be finite, got {v_target}")
         u_last, s, u0, v0, v_last = (float(x) for x in state)

@@ -369,7 +369,8 @@ class VirtualDeformation:
         """Inverse of :meth:`s` on |θ1| < π/2 (s is odd and increasing there), by Newton steps
         (for a CasADi ``s``: the same steps as an expression, through :meth:`theta_function`)."""
         if symbolic(s):
-            return ca.vertcat(*[self.theta_function()(s[i]) for i in range(s.numel())])
+            theta = self.theta_function()  # one Function, called per element: small C
+            return ca.vertcat(*[theta(s[i]) for i in range(s.numel())])
         s = np.asarray(s, float)
         theta = s / (self.scale * 2 * self.pretension * self.pinion_radius / self.stiffness)
         theta = np.clip(theta, -1.2, 1.2)

@@ -79,7 +79,13 @@ class PrandtlIshlinskii(SteppedModel):
         return float(self.gain * state[0] - np.sum(state[1:]))
 
     def step(self, state, u: float) -> tuple[np.ndarray, float]:
-        """Exact step to input ``u``; returns ``(state, y)``."""
+        """Exact step to input ``u``; returns ``(state, y)`` (CasADi expressions when ``state``
+        or ``u`` is one)."""
+        if symbolic(state) or symbolic(u):
+            if not self.weights:
+                return ca.vertcat(u), self.linear_gain * u
+            nxt, forces = self.elements.step(state, u)
+            return nxt, self.gain * u - forces
         if not self.weights:
             return np.array([float(u)]), float(self.linear_gain * u)
         nxt, forces = self.elements.step(state, u)

@@ -11,8 +11,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import casadi as ca
 import numpy as np
 
+from hystmpc.models.base import interp, symbolic
 from hystmpc.models.parametric import ParametricHysteresis, identify_major_loop
 from hystmpc.models.prediction import Dynamics, PredictionModel, build_prediction_model
 from hystmpc.models.smooth import smooth_max
@@ -44,8 +46,8 @@ class ReluctanceModel:
     def x_of_force(self, force, gap: float):
         """Lut(F, g): linear in F within a gap's table, linear between gaps (eq. (15))."""
         a, b, w = self.neighbours(gap)
-        xa = np.interp(force, *self.tables[a])
-        xb = np.interp(force, *self.tables[b])
+        xa = interp(force, *self.tables[a])
+        xb = interp(force, *self.tables[b])
         return (1 - w) * xa + w * xb
 
     def force_of_x(self, x, gap: float):
@@ -137,7 +139,8 @@ def prediction_model(model: ReluctanceModel, gap: float, sample_period: float, e
     """
     force = model.smooth_force_of_x(gap, kink_eps)
     dynamics = Dynamics(output=lambda x, h: force(h), sensor_names=(),
-                        steady_input=lambda f: model.x_of_force(np.maximum(f, 0.0), gap))
+                        steady_input=lambda f: model.x_of_force(
+                            ca.if_else(f < 0.0, 0.0, f) if symbolic(f) else np.maximum(f, 0.0), gap))
     return build_prediction_model(model.operator(gap), sample_period, dynamics=dynamics, eps=eps,
                                   direction_eps=direction_eps, disturbance="none", name="reluctance")
 

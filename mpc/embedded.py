@@ -12,9 +12,11 @@
 over one flat memory vector (:class:`MemoryLayout`). They repeat
 :meth:`NmpcController.step <hystmpc.mpc.controller.NmpcController.step>` operation by
 operation (``feedback`` after ``prepare`` is one Python step), so generated C does what the
-Python controller does. Supported: a state observer (EKF on ``[x; d]``) with the condensed
-multiple-shooting RTI step; the inverse model and the observer's ``initial_state`` must
-accept CasADi expressions (the bench writes them so).
+Python controller does. Supported: a :class:`StateObserver` (EKF on ``[x; d]``) or a
+:class:`MemoryObserver` without creep (the exact hysteresis and dead time, with or without an
+EKF), with the condensed multiple-shooting RTI step; the inverse model and the observer's
+``initial_state`` must accept CasADi expressions (the bench writes them so). What cannot be
+generated raises :class:`NotGeneratable`, saying why.
 """
 
 from __future__ import annotations
@@ -25,8 +27,13 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from hystmpc.mpc.observer import Estimate, StateObserver
+from hystmpc.mpc.observer import Estimate, MemoryObserver, StateObserver
 from hystmpc.mpc.rti import QP_TOLERANCE
+
+
+class NotGeneratable(ValueError):
+    """The controller has a part without a CasADi form yet (the message says which)."""
+
 
 STATUS_CODES = {0: "solved", 1: "solver failed: fallback input sent",
                 2: "estimate not finite: restarted from the sensors, fallback input sent"}
@@ -35,25 +42,26 @@ STATUS_CODES = {0: "solved", 1: "solver failed: fallback input sent",
 
 @dataclass(frozen=True)
 class MemoryLayout:
-    """Where each part of the controller's memory vector sits.
+    """Where each part of the controller's memory vector sits, and its value before the first step.
 
-    ``x`` (model state estimate), ``d`` (disturbance estimate), ``P`` (EKF covariance of
-    ``[x; d]``, column-major), ``u_last`` (input sent last), ``started`` (1 after the first
-    step), ``plan`` (the last successful input plan), ``has_plan``, ``ref_end`` (the last
-    preview's final reference, for the jump test), ``has_ref_end``, ``failures`` and
-    ``estimator_resets`` (counters since the start).
+    The estimator's parts first (a state observer: ``x``, ``d``, ``P``, the EKF covariance
+    of ``[x; d]`` column-major; the exact-memory observer: ``hysteresis``, ``queue``, and
+    ``x``, ``d``, ``P`` of its EKF if it has one), then ``u_last`` (input sent last),
+    ``started`` (1 after the first step), ``plan`` (the last successful input plan),
+    ``has_plan``, ``ref_end`` (the last preview's final reference, for the jump test),
+    ``has_ref_end``, ``failures`` and ``estimator_resets`` (counters since the start).
     """
 
-    nx: int
-    nd: int
+    estimator: tuple[tuple[str, int], ...]
     horizon: int
+    initial_values: tuple[tuple[str, tuple[float, ...]], ...] = ()
+    """Parts that do not start at zero (the exact memory's rest state)."""
 
     @property
     def parts(self) -> dict[str, int]:
         """Name -> length, in memory order."""
-        n = self.nx + self.nd
-        return {"x": self.nx, "d": self.nd, "P": n * n, "u_last": 1, "started": 1, "plan": self.horizon,
-                "has_plan": 1, "ref_end": 1, "has_ref_end": 1, "failures": 1, "estimator_resets": 1}
+        return {**dict(self.estimator), "u_last": 1, "started": 1, "plan": self.horizon, "has_plan": 1,
+                "ref_end": 1, "has_ref_end": 1, "failures": 1, "estimator_resets": 1}
 
     @property
     def slices(self) -> dict[str, slice]:
@@ -69,6 +77,13 @@ class MemoryLayout:
         """Length of the memory vector."""
         return sum(self.parts.values())
 
+    def initial(self) -> np.ndarray:
+        """The memory before the first step."""
+        mem = np.zeros(self.size)
+        for name, values in self.initial_values:
+            mem[self.slices[name]] = values
+        return mem
+
     def pack(self, mem: ca.MX, **parts) -> ca.MX:
         """``mem`` with the named parts replaced."""
         unknown = set(parts) - set(self.parts)
@@ -76,6 +91,12 @@ class MemoryLayout:
             raise ValueError(f"unknown memory parts {sorted(unknown)}")
         return ca.vertcat(*[ca.vec(parts[name]) if name in parts else mem[sl]
                             for name, sl in self.slices.items()])
+
+
+def _rows(v, start: int, stop: int) -> ca.MX:
+    """``v[start:stop]`` as a column, also for a 1x1 ``v`` and an empty range (where CasADi's
+    slicing gives a 1x0 row that will not stack)."""
+    return ca.vertcat(*[v[i] for i in range(start, stop)]) if stop > start else ca.MX(0, 1)
 
 
 def _finite(v) -> ca.MX:
@@ -100,16 +121,137 @@ def feasible_guess_expr(u, u_prev, u_min: float, u_max: float, du_max: float) ->
     return ca.vertcat(*out)
 
 
+class _StateEstimator:
+    """A :class:`StateObserver` as expressions: an EKF on the whole model's ``[x; d]``."""
+
+    def __init__(self, controller):
+        self.observer, self.model = controller.observer, controller.model
+        self.ekf = self.observer.ekf
+        nx, nd = self.model.nx, self.model.nd
+        self.parts = (("x", nx), ("d", nd), ("P", (nx + nd) ** 2))
+        self.initial_values = ()
+
+    def prepare(self, part, u_last) -> dict:
+        """The parts after the time update with the input sent last."""
+        ekf, nx = self.ekf, self.model.nx
+        n = nx + self.model.nd
+        xd, P = ekf.time_update(part("x"), u_last, part("d"), ca.reshape(part("P"), n, n), ca.DM(ekf.Q))
+        return {"x": _rows(xd, 0, nx), "d": _rows(xd, nx, n), "P": P}
+
+    def feedback(self, part, z, started):
+        """``(parts, estimate, condition, lost, predicted)`` after the measurement ``z``."""
+        ekf, model = self.ekf, self.model
+        nx, nd = model.nx, model.nd
+        n = nx + nd
+        x0 = _symbolic(self.observer.initial_state, "the observer's initial_state", z, nx)
+        x_rest = ca.vertcat(x0, ca.DM.zeros(nd))
+        P_rest = ca.DM(np.diag(self.observer.initial_covariance))
+        xd = ca.if_else(started, ca.vertcat(part("x"), part("d")), x_rest)
+        P = ca.if_else(started, ca.reshape(part("P"), n, n), P_rest)
+        predicted = model.output(_rows(xd, 0, nx), _rows(xd, nx, n))
+        xd_update, P_update = ekf.measurement_update(_rows(xd, 0, nx), _rows(xd, nx, n), P, z, ca.DM(ekf.R))
+        lost = ca.logic_not(_finite(xd_update))
+        xd = ca.if_else(lost, x_rest, xd_update)
+        P = ca.if_else(lost, P_rest, P_update)
+        x, d = _rows(xd, 0, nx), _rows(xd, nx, n)
+        return {"x": x, "d": d, "P": P}, Estimate(x, d), ca.vertcat(x, d), lost, predicted
+
+
+class _MemoryEstimator:
+    """A :class:`MemoryObserver` as expressions: the exact hysteresis and dead time on the
+    inputs sent, and the EKF (on the dynamics, or on the whole model with the exact states
+    held) if there is one. Creep models are not supported yet."""
+
+    def __init__(self, controller):
+        obs, model = controller.observer, controller.model
+        if obs.creeping:
+            raise NotGeneratable("a generated controller does not run a creep memory (the GL history) yet")
+        self.observer, self.model, self.memory, self.ekf = obs, model, obs.memory, obs.ekf
+        hysteresis = self.memory.hysteresis
+        n_h, D = len(hysteresis.initial_state(obs.rest_input)), self.memory.delay_samples
+        parts = [("hysteresis", n_h), ("queue", D)]
+        if self.ekf is not None:
+            n_e, nd = self.ekf.model.nx, model.nd
+            parts += [("x", n_e), ("d", nd), ("P", (n_e + nd) ** 2)]
+        self.parts = tuple(parts)
+        values = [("hysteresis", tuple(float(v) for v in hysteresis.initial_state(obs.rest_input))),
+                  ("queue", (obs.rest_input,) * D)]
+        if self.ekf is not None and not obs.split:  # the whole-model EKF's exact states, held
+            values.append(("x", tuple(np.concatenate((np.zeros(self.memory.n_dynamic), values[0][1], values[1][1])))))
+        self.initial_values = tuple(values)
+
+    def _held(self, x_e, hysteresis, queue):
+        """The whole-model EKF's state with its exact part set to the exact memory."""
+        if self.observer.split:
+            return x_e
+        return ca.vertcat(_rows(x_e, 0, self.memory.n_dynamic), hysteresis, queue)
+
+    def prepare(self, part, u_last) -> dict:
+        """The exact memory moved by the input sent last, and the EKF's time update."""
+        queue = part("queue")
+        D = self.memory.delay_samples
+        u_in = queue[0] if D else u_last
+        queue_next = ca.vertcat(_rows(queue, 1, D), u_last) if D else queue
+        try:
+            hysteresis, h = self.memory.hysteresis.step(part("hysteresis"), u_in)
+        except Exception as exc:  # noqa: BLE001 - a NumPy-only step fails in many ways
+            raise NotGeneratable(f"the exact step of {type(self.memory.hysteresis).__name__} does not accept CasADi "
+                                 f"expressions ({type(exc).__name__}: {exc})") from None
+        out = {"hysteresis": hysteresis, "queue": queue_next}
+        if self.ekf is not None:
+            ekf, n_e = self.ekf, self.ekf.model.nx
+            n = n_e + self.model.nd
+            xd, P = ekf.time_update(part("x"), h if self.observer.split else u_last, part("d"),
+                                    ca.reshape(part("P"), n, n), ca.DM(ekf.Q))
+            out.update({"x": self._held(_rows(xd, 0, n_e), hysteresis, queue_next), "d": _rows(xd, n_e, n), "P": P})
+        return out
+
+    def feedback(self, part, z, started):
+        """``(parts, estimate, condition, lost, predicted)`` after the measurement ``z``."""
+        obs, model, nd = self.observer, self.model, self.model.nd
+        hysteresis, queue = part("hysteresis"), part("queue")
+        n_dyn = self.memory.n_dynamic
+        if self.ekf is None:
+            x_dyn, d = ca.DM.zeros(n_dyn), ca.DM.zeros(nd)
+            x = ca.vertcat(x_dyn, hysteresis, queue)
+            return {}, Estimate(x, d, hysteresis, None, queue), ca.vertcat(x, d), ca.MX(0), model.output(x, d)
+        ekf, n_e = self.ekf, self.ekf.model.nx
+        n = n_e + nd
+        x0 = _symbolic(obs.initial_state, "the observer's initial_state", z, n_dyn)
+        x_rest = ca.vertcat(self._held(ca.vertcat(x0, ca.DM.zeros(n_e - n_dyn)), hysteresis, queue), ca.DM.zeros(nd))
+        P_rest = ca.DM(np.diag(obs.initial_covariance))
+        xd = ca.if_else(started, ca.vertcat(part("x"), part("d")), x_rest)
+        P = ca.if_else(started, ca.reshape(part("P"), n, n), P_rest)
+        output = self.memory.dynamics.output if obs.split else model.output
+        predicted = output(_rows(xd, 0, n_e), _rows(xd, n_e, n))
+        xd_update, P_update = ekf.measurement_update(_rows(xd, 0, n_e), _rows(xd, n_e, n), P, z, ca.DM(ekf.R))
+        xd_update = ca.vertcat(self._held(_rows(xd_update, 0, n_e), hysteresis, queue), _rows(xd_update, n_e, n))
+        lost = ca.logic_not(_finite(xd_update))
+        xd = ca.if_else(lost, x_rest, xd_update)
+        P = ca.if_else(lost, P_rest, P_update)
+        x_e, d = _rows(xd, 0, n_e), _rows(xd, n_e, n)
+        x = ca.vertcat(_rows(x_e, 0, n_dyn), hysteresis, queue)
+        return ({"x": x_e, "d": d, "P": P}, Estimate(x, d, hysteresis, None, queue), ca.vertcat(x, d), lost,
+                predicted)
+
+
+def _estimator(controller):
+    observer = controller.observer
+    if isinstance(observer, StateObserver):
+        return _StateEstimator(controller)
+    if isinstance(observer, MemoryObserver):
+        return _MemoryEstimator(controller)
+    raise NotGeneratable(f"a generated controller needs a StateObserver or a MemoryObserver; this one has "
+                     f"{type(observer).__name__}")
+
+
 def _check(controller) -> None:
-    problem, observer = controller.problem, controller.observer
-    if not isinstance(observer, StateObserver):
-        raise ValueError(f"a generated controller needs a StateObserver (an EKF on [x; d]); this one has "
-                         f"{type(observer).__name__}")
+    problem = controller.problem
     if not (getattr(problem, "multiple_shooting", False) and getattr(problem, "condensed", False)):
-        raise ValueError("a generated controller needs the condensed multiple-shooting RTI step "
+        raise NotGeneratable("a generated controller needs the condensed multiple-shooting RTI step "
                          "(nmpc.solver=rti with solver.rti.condensed=true)")
     if problem.rti is None or problem.rti.is_a("External"):
-        raise ValueError("build the controller with nmpc.solver=rti: its RTI step goes into the generated code")
+        raise NotGeneratable("build the controller with nmpc.solver=rti: its RTI step goes into the generated code")
 
 
 def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, ca.Function, MemoryLayout]:
@@ -118,53 +260,42 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     Parameters
     ----------
     controller : NmpcController
-        Built with ``nmpc.solver=rti``, a :class:`StateObserver` and, for
-        ``warm_start='inverse'`` or ``r_input > 0``, an inverse model that accepts CasADi
-        expressions (as the observer's ``initial_state`` must).
+        Built with ``nmpc.solver=rti``, a :class:`StateObserver` or a :class:`MemoryObserver`
+        (without creep) and, for ``warm_start='inverse'`` or ``r_input > 0``, an inverse
+        model that accepts CasADi expressions (as the observer's ``initial_state`` must).
     name : str
         Prefix of the Functions' names (``<name>_feedback``, ``<name>_prepare``).
     """
+    estimator = _estimator(controller)
     _check(controller)
-    model, observer, problem, s = controller.model, controller.observer, controller.problem, controller.settings
-    ekf, bounds = observer.ekf, controller.bounds
-    nx, nd, N, nz = model.nx, model.nd, controller.horizon, model.nz
-    n = nx + nd
-    layout = MemoryLayout(nx, nd, N)
+    model, problem, s, bounds = controller.model, controller.problem, controller.settings, controller.bounds
+    N = controller.horizon
+    layout = MemoryLayout(estimator.parts, N, estimator.initial_values)
     sl = layout.slices
     mem = ca.MX.sym("mem", layout.size)
 
     def part(key):
         return mem[sl[key]]
 
-    P_mem = ca.reshape(part("P"), n, n)
     started = part("started") > 0.5
     u_last = part("u_last")
 
-    # prepare: the time update with the input just sent
-    xd_next, P_next = ekf.time_update(part("x"), u_last, part("d"), P_mem, ca.DM(ekf.Q))
+    # prepare: what the input just sent moves (the EKF's time update, the exact memory)
+    moved = estimator.prepare(part, u_last)
     prepare = ca.Function(f"{name}_prepare", [mem], [layout.pack(
-        mem, x=ca.if_else(started, xd_next[:nx], part("x")), d=ca.if_else(started, xd_next[nx:], part("d")),
-        P=ca.if_else(started, P_next, P_mem))], ["mem"], ["mem_next"])
+        mem, **{key: ca.if_else(started, ca.vec(value), part(key)) for key, value in moved.items()})], ["mem"],
+        ["mem_next"])
 
     # feedback
-    z = ca.MX.sym("z", nz)
+    z = ca.MX.sym("z", model.nz)
     window = ca.MX.sym("ref_preview", N + 1)
-    x_rest = ca.vertcat(_symbolic(observer.initial_state, "the observer's initial_state", z), ca.DM.zeros(nd))
-    P_rest = ca.DM(np.diag(observer.initial_covariance))
-    xd = ca.if_else(started, ca.vertcat(part("x"), part("d")), x_rest)
-    P = ca.if_else(started, P_mem, P_rest)
-    predicted = model.output(xd[:nx], xd[nx:])
-    xd_update, P_update = ekf.measurement_update(xd[:nx], xd[nx:], P, z)
-    lost = ca.logic_not(_finite(xd_update))
-    xd = ca.if_else(lost, x_rest, xd_update)
-    P = ca.if_else(lost, P_rest, P_update)
-    x, d = xd[:nx], xd[nx:]
+    estimated, est, condition, lost, predicted = estimator.feedback(part, z, started)
 
     refs = window[1:] if s.preview else ca.repmat(window[0], N, 1)
     u_min, u_max, rate = float(bounds.lower), float(bounds.upper), float(bounds.rate)
     u_inv = None
     if controller.inverse is not None:
-        raw = _symbolic(lambda r: controller.inverse(Estimate(x, d), r), "the inverse model", refs)
+        raw = _symbolic(lambda r: controller.inverse(est, r), "the inverse model", refs, N)
         u_inv = _clip(ca.if_else(ca.fabs(raw) < ca.inf, raw, u_last), u_min, u_max)
     jump = ca.MX(0)
     if np.isfinite(controller.jump_threshold):
@@ -180,11 +311,11 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
         u_guess = ca.if_else(has_plan, shifted, ca.repmat(u_last, N, 1))
     u_ff = u_inv if s.r_input > 0 else ca.DM.zeros(N)
     w = feasible_guess_expr(u_guess, u_last, u_min, u_max, rate)
-    p = ca.vertcat(x, d, u_last, refs, u_ff)
+    p = ca.vertcat(condition, u_last, refs, u_ff)
     worst, broken = ca.MX(0), ca.MX(0)
     for _ in range(controller.solvers.rti.iterations):
         w_next, qp_error = problem.rti(w, p)
-        worst = ca.if_else(qp_error <= worst, worst, qp_error)  # a NaN error is kept, as rti_steps does
+        worst = ca.if_else(qp_error <= worst, worst, qp_error)  # as rti_steps: a NaN error replaces the worst
         finite = _finite(w_next)
         broken = ca.logic_or(broken, ca.logic_not(finite))
         w = ca.if_else(finite, w_next, w)  # a non-finite step is a failure; the next QP gets finite data
@@ -198,7 +329,7 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     u = _clip(u, u_min, u_max)
     status = ca.if_else(lost, 2, ca.if_else(success, 0, 1))
     mem_next = layout.pack(
-        mem, x=x, d=d, P=P, u_last=u, started=1, plan=ca.if_else(success, w, plan), has_plan=success,
+        mem, **estimated, u_last=u, started=1, plan=ca.if_else(success, w, plan), has_plan=success,
         ref_end=refs[-1], has_ref_end=1, failures=part("failures") + ca.logic_not(success),
         estimator_resets=part("estimator_resets") + lost)
     feedback = ca.Function(f"{name}_feedback", [mem, z, window], [mem_next, u, status, predicted],
@@ -206,8 +337,9 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     return feedback, prepare, layout
 
 
-def _symbolic(fun, what: str, arg):
-    """``fun(arg)`` on a CasADi symbol as a column, or a ValueError saying ``what`` has no CasADi form."""
+def _symbolic(fun, what: str, arg, size: int):
+    """``fun(arg)`` on a CasADi symbol as a column of ``size`` entries, or :class:`NotGeneratable`
+    saying ``what`` has no CasADi form (or gives the wrong length)."""
     try:
         with warnings.catch_warnings():  # a NumPy-only function on a CasADi symbol warns before it fails
             warnings.simplefilter("ignore")
@@ -215,14 +347,11 @@ def _symbolic(fun, what: str, arg):
         if not isinstance(out, (ca.MX, ca.SX, ca.DM)):
             raise TypeError(f"returned {type(out).__name__}")
     except Exception as exc:  # noqa: BLE001 - any failure means the same thing here
-        raise ValueError(f"{what} does not accept CasADi expressions ({type(exc).__name__}: {exc}); "
-                         "write it with casadi operations for a generated controller") from None
+        raise NotGeneratable(f"{what} does not accept CasADi expressions ({type(exc).__name__}: {exc}); "
+                             "write it with casadi operations for a generated controller") from None
+    if out.numel() != size:
+        raise NotGeneratable(f"{what} gives {out.numel()} values on CasADi expressions, {size} expected")
     return ca.vec(out)
-
-
-def initial_memory(layout: MemoryLayout) -> np.ndarray:
-    """The memory before the first step: nothing started (every entry zero)."""
-    return np.zeros(layout.size)
 
 
 class FunctionController:
@@ -247,7 +376,7 @@ class FunctionController:
 
     def reset(self) -> None:
         """Back to the memory before the first step."""
-        self.mem = initial_memory(self.layout)
+        self.mem = self.layout.initial()
         self.statuses: dict[int, int] = {}
         self.predicted_output = float("nan")
 

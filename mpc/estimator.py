@@ -46,24 +46,23 @@ class DisturbanceEKF:
     def _update_functions(self) -> tuple[ca.Function, ca.Function]:
         """The time and measurement updates as CasADi Functions (matrix products as loops):
         the Python filter and the generated controller (:mod:`hystmpc.mpc.embedded`) call the
-        same ones, so they round alike. ``Q`` is an argument: an observer may change it."""
+        same ones, so they round alike. ``Q`` and ``R`` are arguments: an observer may change them."""
         nx, nd, nz = self.model.nx, self.model.nd, self.model.nz
         x, u, d = ca.MX.sym("x", nx), ca.MX.sym("u", self.model.nu), ca.MX.sym("d", nd)
         P, Q = ca.MX.sym("P", nx + nd, nx + nd), ca.MX.sym("Q", nx + nd, nx + nd)
         xd_next, A = self._predict(x, u, d)
         time_update = ca.Function("ekf_time_update", [x, u, d, P, Q], [xd_next, A @ P @ A.T + Q],
                                   ["x", "u", "d", "P", "Q"], ["xd_next", "P_next"])
-        z = ca.MX.sym("z", nz)
+        z, R = ca.MX.sym("z", nz), ca.MX.sym("R", nz, nz)
         xd, P_next = ca.vertcat(x, d), P
         if nz:
             z_pred, C = self._measure(x, d)
-            R = ca.DM(self.R)
             K = ca.solve(C @ P @ C.T + R, C @ P, "qr").T
             xd = xd + K @ (z - z_pred)
             I_KC = ca.DM.eye(nx + nd) - K @ C
             P_next = I_KC @ P @ I_KC.T + K @ R @ K.T  # Joseph form: stays symmetric PSD
-        measurement_update = ca.Function("ekf_measurement_update", [x, d, P, z], [xd, P_next],
-                                         ["x", "d", "P", "z"], ["xd_next", "P_next"])
+        measurement_update = ca.Function("ekf_measurement_update", [x, d, P, z, R], [xd, P_next],
+                                         ["x", "d", "P", "z", "R"], ["xd_next", "P_next"])
         return time_update, measurement_update
 
     def reset(self, x0, d0, P0) -> None:
@@ -80,7 +79,7 @@ class DisturbanceEKF:
 
     def update(self, z_meas) -> None:
         """Measurement update with the sensor vector ``z_meas``."""
-        z, P = self.measurement_update(self.x, self.d, self.P, np.asarray(z_meas, float))
+        z, P = self.measurement_update(self.x, self.d, self.P, np.asarray(z_meas, float), self.R)
         z = np.asarray(z).ravel()
         self.x, self.d, self.P = z[: self.model.nx], z[self.model.nx:], np.asarray(P)
 

@@ -16,8 +16,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import casadi as ca
 import numpy as np
 
+from hystmpc.models.base import symbolic
 from hystmpc.models.fractional import gl_weights
 from hystmpc.models.prediction import CreepPredictionModel, InputMemory, PredictionModel
 from hystmpc.mpc.estimator import DisturbanceEKF
@@ -132,7 +134,7 @@ class MemoryObserver:
         if ekf is None and (self.memory.n_dynamic or model.sensor_names):
             raise ValueError("a model with dynamic states or sensors needs an EKF")
         n_dyn = self.memory.n_dynamic
-        self.initial_state = initial_state or (lambda z: np.zeros(n_dyn))
+        self.initial_state = initial_state or (lambda z: ca.DM.zeros(n_dyn) if symbolic(z) else np.zeros(n_dyn))
         covariance = np.diag(ekf.P).copy() if initial_covariance is None and ekf is not None else initial_covariance
         self.initial_covariance = None if covariance is None else np.asarray(covariance, float)
         if ekf is not None and not self.split:  # hold the exact states: no noise, no covariance
@@ -230,6 +232,8 @@ def memory_inverse(memory: InputMemory, sample_period: float) -> Callable[[Estim
     alpha = memory.creep_order
 
     def inverse(est: Estimate, refs) -> np.ndarray:
+        if symbolic(est.hysteresis):
+            return symbolic_inverse(est, refs)
         refs = np.asarray(refs, float)
         n, D = len(refs), memory.delay_samples
         reached = refs[np.minimum(np.arange(n) + D, n - 1)]  # the input acts after the dead time
@@ -254,4 +258,30 @@ def memory_inverse(memory: InputMemory, sample_period: float) -> Callable[[Estim
             ws.append(hysteresis.output(state))
             out[j] = u
         return out
+
+    def symbolic_inverse(est: Estimate, refs):
+        """The same steps on CasADi expressions, for a generated controller: an unreachable
+        target (the hysteresis model's symbolic ``inverse_step`` gives a NaN input) holds the
+        input and the state."""
+        if alpha:
+            raise ValueError("the creep inverse has no CasADi form yet")
+        n, D = refs.shape[0], memory.delay_samples
+        reached = ca.vertcat(*[refs[min(j + D, n - 1)] for j in range(n)])
+        d = est.d[0] if est.d.numel() else 0.0
+        targets = (steady(reached - d) if mode == "output" else
+                   steady(reached) - d if mode == "hysteresis" else steady(reached))
+        state = est.hysteresis
+        for i in range(est.queue.numel() if est.queue is not None else 0):
+            state, _ = hysteresis.step(state, est.queue[i])
+        sym_state, sym_target = ca.SX.sym("state", state.numel()), ca.SX.sym("target")
+        step = ca.Function("hysteresis_inverse_step", [sym_state, sym_target],  # one Function, called per sample
+                           [*hysteresis.inverse_step(sym_state, sym_target)])
+        u, out = ca.MX(np.nan), []
+        for j in range(n):
+            state_next, u_next = step(state, targets[j])
+            reachable = ca.fabs(u_next) < ca.inf
+            state = ca.if_else(reachable, state_next, state)
+            u = ca.if_else(reachable, u_next, u)
+            out.append(u)
+        return ca.vertcat(*out)
     return inverse
