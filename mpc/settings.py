@@ -117,11 +117,16 @@ class GaussNewtonSettings:
     """Iteration limit per sample."""
     tol: float = 1e-6
     """Stop when the step is below ``tol·(1 + max|u|)``."""
+    ftol: float = 0.0
+    """Also stop (converged) when a step lowers the cost by less than ``ftol`` times the cost:
+    Gauss–Newton crawling with tiny step fractions on a large residual (0: never)."""
 
     def __post_init__(self):
         if self.max_iter < 1:
             raise ValueError(f"max_iter must be >= 1, got {self.max_iter}")
         _check_finite(self, ("tol",), strict=True)
+        if not (np.isfinite(self.ftol) and 0.0 <= self.ftol < 1.0):
+            raise ValueError(f"ftol must be in [0, 1), got {self.ftol}")
 
 
 @dataclass(frozen=True)

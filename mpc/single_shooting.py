@@ -179,8 +179,9 @@ class SingleShootingProblem(TrackingProblem):
             else:  # no descent left: stationary, unless the cost stopped being a number
                 finite = np.isfinite(cost_t)
                 return u, bool(finite), "Solve_Succeeded" if finite else "Non_Finite_Cost", it
+            stalled = cost - cost_t < gn.ftol * cost
             u, res, J, cost = trial, res_t.ravel(), J_t, cost_t
-            if np.max(np.abs(t * step)) <= gn.tol * (1.0 + np.max(np.abs(u))):
+            if np.max(np.abs(t * step)) <= gn.tol * (1.0 + np.max(np.abs(u))) or stalled:
                 return u, True, "Solve_Succeeded", it
         return u, False, "Maximum_Iterations_Exceeded", gn.max_iter
 

@@ -158,7 +158,9 @@ def _defaults() -> dict:
             "lmpc": InverseLmpcSettings(horizon=15, q_output=1e4, r_rate=1.0),
             "nmpc": NmpcSettings(horizon=15, q_output=1e4, r_rate=1.0, solver="gn"),
             "smoothing": Smoothing(eps=1e-3, direction_eps=1e-4),
-            "solver": SolverSettings().uniform(max_iter=60, tol=1e-3)}
+            # ftol: a Gauss-Newton solve that crawls (step fractions of 1/256 lowering the cost by
+            # 0.03 % per iteration) stops as converged instead of failing at max_iter (docs/dea.md)
+            "solver": SolverSettings().uniform(max_iter=60, tol=1e-3, ftol=1e-3)}
 
 
 def _controllers() -> dict[str, ControllerSpec]:
