@@ -6,8 +6,9 @@
   update, the restart of a non-finite estimate, the jump test, the warm start (shifted plan,
   or the inverse model), the rate-feasible guess, the RTI steps, the success test, the
   fallback and the bound and rate clip; and
-* ``prepare(mem) -> mem_next``: what does not need the next measurement, the EKF's time
-  update with the input just sent,
+* ``prepare(mem) -> mem_next``: what does not need the next measurement: the EKF's time
+  update with the input just sent and, for an input-driven model, the exact hysteresis and
+  dead-time queue moved by it,
 
 over one flat memory vector (:class:`MemoryLayout`). They repeat
 :meth:`NmpcController.step <hystmpc.mpc.controller.NmpcController.step>` operation by
