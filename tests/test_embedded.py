@@ -19,16 +19,30 @@ def _pam(*assignments):
     return bench, config
 
 
-def test_the_functions_repeat_the_python_controller_on_pam():
-    bench, config = _pam()
-    scenario = bench.scenarios[bench.default_scenario]
-    python = bench.run(scenario, "nmpc", config, duration=4.0)
+def _python_and_generated(bench_name: str, scenario: str, duration: float):
+    """The Python controller's run and its Functions' run (in-process) on the same plant."""
+    bench = get_bench(bench_name)
+    config = bench.configure(["nmpc.solver=rti"])
+    python = bench.run(scenario, "nmpc", config, duration=duration)
     prepared = bench.prepare(scenario, "nmpc", config)
     functions = FunctionController(prepared.controller, *controller_functions(prepared.controller))
-    generated = bench.run(scenario, "nmpc", duration=4.0, prepared=replace(prepared, controller=functions))
+    generated = bench.run(scenario, "nmpc", duration=duration, prepared=replace(prepared, controller=functions))
+    return python, generated, functions
+
+
+@pytest.mark.parametrize(("bench_name", "scenario", "duration", "moves"), [
+    ("pam", "square-20", 4.0, 1.0),  # the EKF on the whole state, pam's inverse and rest state
+    ("compliant", "sine-2", 2.0, 0.05),  # power-function turning points, Newton steps for θ(s)
+    # the exact memory without sensors: the parametric hysteresis run exactly on the currents
+    # sent (Lambert W as Halley steps), the inverse through the look-up table
+    ("reluctance", "reversals-1.75mm", 0.3, 1.0),
+])
+def test_the_functions_repeat_the_python_controller(bench_name, scenario, duration, moves):
+    python, generated, functions = _python_and_generated(bench_name, scenario, duration)
     assert np.max(np.abs(python.input - generated.input)) <= 1e-9
     assert np.max(np.abs(python.predicted[1:] - generated.predicted[1:])) <= 1e-9
     assert functions.stats()["failures"] == python.solver["failures"]
+    assert np.ptp(generated.input) > moves  # the inputs moved: estimator and memory were exercised
 
 
 def test_failures_and_lost_estimates_take_the_python_controllers_fallbacks():
@@ -83,32 +97,6 @@ def test_controllers_without_a_casadi_form_are_refused_with_the_reason():
         controller_functions(numpy_only)
     with pytest.raises(ValueError, match="build the controller with nmpc.solver=rti"):
         controller_functions(bench.build_controller("nmpc", bench.configure()))  # rti-c: a compiled step
-
-
-def test_the_functions_repeat_the_python_controller_on_compliant():
-    """compliant's inverse (power-function turning points, Newton steps for θ(s)) as expressions."""
-    bench = get_bench("compliant")
-    config = bench.configure(["nmpc.solver=rti"])
-    scenario = bench.scenarios["sine-2"]
-    python = bench.run(scenario, "nmpc", config, duration=2.0)
-    prepared = bench.prepare(scenario, "nmpc", config)
-    functions = FunctionController(prepared.controller, *controller_functions(prepared.controller))
-    generated = bench.run(scenario, "nmpc", duration=2.0, prepared=replace(prepared, controller=functions))
-    assert np.max(np.abs(python.input - generated.input)) <= 1e-9
-
-
-def test_the_functions_repeat_the_python_controller_on_reluctance():
-    """The exact-memory observer without sensors: the parametric hysteresis run exactly on the
-    currents sent (Lambert W as Halley steps), the inverse through the look-up table."""
-    bench = get_bench("reluctance")
-    config = bench.configure(["nmpc.solver=rti"])
-    scenario = bench.scenarios["reversals-1.75mm"]
-    python = bench.run(scenario, "nmpc", config, duration=0.3)
-    prepared = bench.prepare(scenario, "nmpc", config)
-    functions = FunctionController(prepared.controller, *controller_functions(prepared.controller))
-    generated = bench.run(scenario, "nmpc", duration=0.3, prepared=replace(prepared, controller=functions))
-    assert np.max(np.abs(python.input - generated.input)) <= 1e-9
-    assert np.ptp(generated.input) > 1.0  # the currents moved: the memory was exercised
 
 
 def test_symbolic_interp_is_numpys():
