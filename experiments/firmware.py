@@ -12,6 +12,7 @@ runs the bench's default scenario with the compiled controller driving the Pytho
 from __future__ import annotations
 
 import ctypes
+import re
 import shlex
 import subprocess
 from dataclasses import replace
@@ -259,11 +260,13 @@ def write_controller(bench: Bench, config: dict, out: Path, name: str | None = N
     """Write the bench's whole NMPC controller as C into ``out`` and build it (shared library
     and example loop). Returns what was written: names, sizes, the memory layout.
 
-    Raises ``ValueError`` when the bench's controller cannot be generated (see
-    :func:`hystmpc.mpc.embedded.controller_functions`), ``RuntimeError`` when the build fails.
+    Raises :class:`~hystmpc.mpc.embedded.NotGeneratable` (a ``ValueError``) when the bench's
+    controller cannot be generated, ``RuntimeError`` when the build fails. ``name`` (default:
+    the bench's name) becomes a C identifier: other characters turn into ``_``.
     """
     from hystmpc.experiments.report import version
-    name = name or bench.name.replace("-", "_")
+    name = re.sub(r"\W", "_", name or bench.name, flags=re.ASCII)
+    name = f"c_{name}" if name[0].isdigit() else name
     controller = bench.build_controller("nmpc", controller_config(bench, config))
     feedback, prepare, layout = controller_functions(controller, f"{name}_nmpc")
     out.mkdir(parents=True, exist_ok=True)
