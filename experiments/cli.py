@@ -99,6 +99,8 @@ def build_parser() -> argparse.ArgumentParser:
     p_cg.add_argument("--verify", action="store_true",
                       help="replay the default scenario with the in-process and the compiled solver")
     p_cg.add_argument("--duration", type=float, help="length of the verification run (s)")
+    p_cg.add_argument("--target", help="also cross-compile the whole controller for a microcontroller and "
+                      "report its size: cortex-m7 (needs arm-none-eabi-gcc)")
     p_cg.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     p_cg.add_argument("--json", dest="json_file", help=JSON_HELP.format("report"))
     p_cg.add_argument("--force", action="store_true", help=FORCE_HELP)
@@ -193,6 +195,7 @@ def _identify_bench(args) -> int:
 
 
 CODEGEN_SOLVERS = ("rti",)
+CODEGEN_TARGETS = ("cortex-m7",)
 
 
 def _timestamped(folder: Path, prefix: str = "") -> Path:
@@ -315,6 +318,8 @@ def _codegen(args) -> int:
         raise UsageError(f"--solver {args.solver!r} cannot be code-generated yet; "
                          f"allowed: {', '.join(CODEGEN_SOLVERS)}")
     _positive_duration(args.duration)
+    if args.target not in (None, *CODEGEN_TARGETS):
+        raise UsageError(f"--target {args.target!r} is unknown; allowed: {', '.join(CODEGEN_TARGETS)}")
     config = _work_config(bench, args.overrides, args.force)
     if args.duration is not None:
         _samples(args.duration, bench.sample_period, "--duration", args.force)
@@ -323,7 +328,7 @@ def _codegen(args) -> int:
     created = _output_folder(out)  # a build folder: its files are replaced
     with _cleanup_on_error(out, created):
         try:
-            report = codegen(bench, config, out, args.verify, args.duration)
+            report = codegen(bench, config, out, args.verify, args.duration, args.target)
         except ValueError as exc:
             raise UsageError(str(exc)) from None
     _write_json_target(report, json_target)
@@ -335,6 +340,10 @@ def _codegen(args) -> int:
         else:
             print(f"whole controller (estimator, warm start, solver, fallback) in {ctrl['folder']}: {ctrl['name']}.h "
                   f"documents the interface; example loop {ctrl['name']}_main")
+        if args.target in ctrl:
+            m7 = ctrl[args.target]
+            print(f"{args.target} build ({m7['qp']} QP): text {m7['text']:,} B, data {m7['data']:,} B, "
+                  f"bss {m7['bss']:,} B: {m7['elf']}")
         if args.verify and "verify" in ctrl:
             v = ctrl["verify"]
             loop = v["example_loop"]

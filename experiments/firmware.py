@@ -14,7 +14,9 @@ from __future__ import annotations
 import ctypes
 import re
 import shlex
+import shutil
 import subprocess
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -316,6 +318,8 @@ def _estimator_docs(controller) -> dict[str, str]:
     observer = controller.observer
     if isinstance(observer, MemoryObserver):
         memory = "the exact hysteresis memory" + (" and dead time" if observer.memory.delay_samples else "")
+        if observer.creeping:
+            memory += f" and the creep memory (the last {observer.creep_window + 1} hysteresis outputs)"
         if observer.ekf is None:
             return {"feedback_doc": f"no estimation (the actuator has no sensors: {memory} follows the inputs sent)",
                     "prepare_doc": f"moves {memory} with the input just sent",
@@ -454,3 +458,98 @@ def _recorded_sensors(bench: Bench, scenario, config: dict, run, python_controll
         if k < len(run.input) - 1:
             meas = plant.step(u)
     return np.asarray(rows)
+
+
+CORTEX_M7_FLAGS = ("-mcpu=cortex-m7", "-mfpu=fpv5-d16", "-mfloat-abi=hard", "-mthumb", "-Os",
+                   "-ffunction-sections", "-fdata-sections", "-ffp-contract=off")
+"""A Cortex-M7 with a double-precision FPU, optimised for size; unused functions dropped at link."""
+DAQP_VERSION = "0.11.0"
+"""DAQP release whose C sources a cross build compiles (CasADi's generated call needs
+``EXIT_OPTIMAL`` defined as this release's ``DAQP_EXIT_OPTIMAL``)."""
+
+FIRMWARE_C = r"""/* A bare-metal loop around the controller, for the Cortex-M7 size check: what the
+   firmware links (init, step, prepare, a static controller). The sensors and the preview
+   come from buffers a driver would fill. */
+#include "{name}.h"
+
+static {name}_controller ctrl;
+volatile double sensors[{NAME}_NZ + 1], preview[{NAME}_N + 1], command;
+
+int main(void) {{
+  {name}_init(&ctrl);
+  for (;;) {{
+    double y[{NAME}_NZ + 1], r[{NAME}_N + 1], u;
+    for (int i = 0; i < {NAME}_NZ; ++i) y[i] = sensors[i];
+    for (int i = 0; i <= {NAME}_N; ++i) r[i] = preview[i];
+    {name}_step(&ctrl, y, r, &u);
+    command = u;
+    {name}_prepare(&ctrl);
+  }}
+}}
+"""
+
+
+def daqp_sources() -> Path:
+    """DAQP's C sources (``include/`` and ``src/``) for a cross build: from the hystmpc cache,
+    else downloaded once from PyPI (the sdist of :data:`DAQP_VERSION`, with pip, so pip's
+    own index settings apply)."""
+    import tarfile
+    import tempfile
+
+    from hystmpc.mpc.rti import LOG, cache_dir
+    target = cache_dir() / f"daqp-{DAQP_VERSION}"
+    if (target / "src").is_dir() and (target / "include").is_dir():
+        return target
+    LOG.warning(f"downloading DAQP {DAQP_VERSION}'s C sources from PyPI once, into {target}")
+    with tempfile.TemporaryDirectory() as tmp:
+        done = subprocess.run([sys.executable, "-m", "pip", "download", "-q", f"daqp=={DAQP_VERSION}", "--no-deps",
+                               "--no-binary", "daqp", "-d", tmp], capture_output=True, text=True)
+        archives = sorted(Path(tmp).glob("daqp-*.tar.gz"))
+        if done.returncode != 0 or not archives:
+            raise RuntimeError(f"could not download DAQP {DAQP_VERSION}'s sources ({done.stderr.strip()[-300:]}); "
+                               f"put its csrc/include and csrc/src folders into {target}")
+        with tarfile.open(archives[0]) as tar:
+            members = [m for m in tar.getmembers() if "/csrc/" in m.name and m.isfile()]
+            safe = {"filter": "data"} if hasattr(tarfile, "data_filter") else {}
+            tar.extractall(tmp, members=members, **safe)
+        csrc = next(Path(tmp).glob("daqp-*/csrc"))
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copytree(csrc, target, dirs_exist_ok=True)
+    return target
+
+
+def cross_compile(out: Path, name: str, compiler: str = "arm-none-eabi-gcc") -> dict:
+    """Build the generated controller in ``out`` for a Cortex-M7 (:data:`CORTEX_M7_FLAGS`, newlib
+    without system calls, libm) around :data:`FIRMWARE_C`, and measure it.
+
+    Returns the ELF's ``text``, ``data`` and ``bss`` in bytes (``arm-none-eabi-size``), the
+    flags, and the QP (DAQP's sources are compiled in where the step uses DAQP). Raises
+    ``RuntimeError`` when the cross compiler is missing or the build fails.
+    """
+    gcc = shutil.which(compiler)
+    size_tool = shutil.which(compiler.replace("gcc", "size"))
+    if gcc is None or size_tool is None:
+        raise RuntimeError(f"{compiler} not found: install a cross compiler for the Cortex-M7 "
+                           "(Debian/Ubuntu: apt-get install gcc-arm-none-eabi)")
+    build = out / "cortex-m7"
+    build.mkdir(exist_ok=True)
+    (build / "firmware.c").write_text(FIRMWARE_C.format(name=name, NAME=name.upper()))
+    sources = [build / "firmware.c", out / f"{name}.c", out / f"{name}_nmpc.c"]
+    flags = [*CORTEX_M7_FLAGS, f"-I{out}"]
+    uses_daqp = "daqp/api.h" in (out / f"{name}_nmpc.c").read_text()
+    if uses_daqp:
+        daqp = daqp_sources()
+        headers = build / "include"
+        shutil.copytree(daqp / "include", headers / "daqp", dirs_exist_ok=True)
+        flags += [f"-I{headers}", f"-I{headers / 'daqp'}", "-DEXIT_OPTIMAL=DAQP_EXIT_OPTIMAL"]
+        sources += sorted((daqp / "src").glob("*.c"))
+    elf = build / f"{name}.elf"
+    cmd = [gcc, *flags, *map(str, sources), "--specs=nosys.specs", "-Wl,--gc-sections", "-lm", "-o", str(elf)]
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"cortex-m7 build failed: {done.stderr.strip()[-1500:]}")
+    sized = subprocess.run([size_tool, str(elf)], capture_output=True, text=True, check=True).stdout.split("\n")
+    text, data, bss = (int(v) for v in sized[1].split()[:3])
+    return {"target": "cortex-m7", "elf": str(elf), "text": text, "data": data, "bss": bss,
+            "flags": " ".join(CORTEX_M7_FLAGS), "qp": f"DAQP {DAQP_VERSION} sources" if uses_daqp else "generated",
+            "compiler": subprocess.run([gcc, "-dumpversion"], capture_output=True, text=True).stdout.strip()}

@@ -24,7 +24,7 @@ import casadi as ca
 import numpy as np
 
 from hystmpc.experiments.bench import Bench
-from hystmpc.experiments.firmware import verify_controller, write_controller
+from hystmpc.experiments.firmware import cross_compile, verify_controller, write_controller
 from hystmpc.mpc.embedded import NotGeneratable
 from hystmpc.mpc.rti import COMPILE_FLAGS, _accept_last_qp_iterate, c_compiler, library_flags
 
@@ -182,16 +182,26 @@ def run_program(out: Path, calls: np.ndarray, n_w: int, repeats: int = 1) -> tup
     return np.loadtxt(outputs, ndmin=2), timing
 
 
-def codegen(bench: Bench, config: dict, out: Path, verify: bool, duration: float | None = None) -> dict:
+def codegen(bench: Bench, config: dict, out: Path, verify: bool, duration: float | None = None,
+            target: str | None = None) -> dict:
     """``hystmpc codegen``: write and build the C solver; with ``verify``, replay the default
-    scenario closed loop with both solvers and run the standalone program on its inputs."""
-    compiled = write_solver(bench, config, out)
-    report = {"bench": bench.name, "out": str(out), "files": sorted(p.name for p in out.iterdir())}
-    try:
-        report["controller"] = write_controller(bench, config, out / "controller")
+    scenario closed loop with both solvers and run the standalone program on its inputs; with
+    ``target='cortex-m7'``, also cross-compile the whole controller and report its size."""
+    if target not in (None, "cortex-m7"):
+        raise ValueError(f"target {target!r} is unknown; allowed: cortex-m7")
+    try:  # the whole controller first: a target that needs it fails before the solver is built
+        controller = write_controller(bench, config, out / "controller")
     except NotGeneratable as exc:  # this bench's controller has parts without a CasADi form yet
         shutil.rmtree(out / "controller", ignore_errors=True)
-        report["controller"] = {"skipped": str(exc)}
+        if target is not None:
+            raise ValueError(f"--target {target} builds the whole controller, which cannot be generated: "
+                             f"{exc}") from None
+        controller = {"skipped": str(exc)}
+    compiled = write_solver(bench, config, out)
+    report = {"bench": bench.name, "out": str(out), "files": sorted(p.name for p in out.iterdir()),
+              "controller": controller}
+    if target is not None:
+        report["controller"][target] = cross_compile(out / "controller", report["controller"]["name"])
     if not verify:
         return report
     if "skipped" not in report["controller"]:

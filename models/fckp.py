@@ -133,7 +133,11 @@ class Fckp(SteppedModel):
         return GrunwaldLetnikov(self.params.creep_order, self.params.sample_period, window)
 
     def step(self, state, u: float) -> tuple[np.ndarray, float]:
-        """Exact KP step to voltage ``u``; returns ``(state, w)`` (creep-free, mm)."""
+        """Exact KP step to voltage ``u``; returns ``(state, w)`` (creep-free, mm). Also on
+        CasADi expressions."""
+        if symbolic(state) or symbolic(u):
+            state, kappa = self.kp.step(state, self.normalise(u))
+            return state, self.static(kappa)
         state, kappa = self.kp.step(state, float(self.normalise(u)))
         return state, float(self.static(kappa))
 
@@ -154,7 +158,12 @@ class Fckp(SteppedModel):
 
     def inverse_step(self, state, w_target: float, zeta: float = 0.01) -> tuple[np.ndarray, float]:
         """Section 3.2: the voltage whose KP output reaches ``w_target``, searched from the
-        last input in steps of ζ (V); returns ``(state, u)``."""
+        last input in steps of ζ (V); returns ``(state, u)``. On CasADi expressions (a generated
+        controller) it bisects instead (:meth:`KrasnoselskiiPokrovskii.bisection_inverse`;
+        ``zeta`` does not apply); both find the same input to about 2e-12 V."""
+        if symbolic(state) or symbolic(w_target):
+            p_state, p = self.kp.bisection_inverse(state, self.kappa_of(w_target))
+            return p_state, self.denormalise(p)
         p_state, p = self.kp.inverse_step(state, float(self.kappa_of(w_target)), -1.0, 1.0,
                                           step=2.0 * zeta / self.params.u_max)
         return p_state, float(self.denormalise(p))

@@ -11,6 +11,7 @@ principle); ``None`` keeps the full memory.
 
 from __future__ import annotations
 
+import casadi as ca
 import numpy as np
 
 
@@ -124,3 +125,32 @@ class GrunwaldLetnikov:
             n = len(past) if self.window is None else max(0, min(len(past), self.window + 1 - i))
             out[i - 1] = self._scale * (self._w[i: i + n] @ past[:n])
         return out
+
+
+def window_functions(order: float, h: float, window: int, horizon: int) -> tuple[ca.Function, ca.Function]:
+    """The streaming GL operator with memory window ``window`` as two CasADi Functions over a
+    buffer of the last ``window + 1`` samples (oldest first, zeros before the first push):
+
+    * ``push(buffer, f) -> (buffer_next, value)``: :meth:`GrunwaldLetnikov.push`;
+    * ``history(buffer) -> terms``: :meth:`GrunwaldLetnikov.history_terms` over ``horizon``.
+
+    Fixed size and plain sums (newest sample first), so generated C and a Python controller
+    that call them compute the same numbers to the last bit.
+    """
+    if window < 0 or horizon < 1:
+        raise ValueError(f"window must be >= 0 and horizon >= 1, got {window}, {horizon}")
+    L = window
+    w = gl_weights(order, L + horizon + 1)
+    scale = h ** (-order)
+    buffer, f = ca.MX.sym("buffer", L + 1), ca.MX.sym("f")
+    shifted = ca.vertcat(buffer[1:], f) if L else f
+    newest_first = shifted[::-1]
+    push = ca.Function("gl_push", [buffer, f], [shifted, scale * ca.dot(ca.DM(w[: L + 1]), newest_first)],
+                       ["buffer", "f"], ["buffer_next", "value"])
+    toeplitz = np.zeros((horizon, L + 1))  # row i-1: w_{i+m} on the m-th newest sample, m <= L - i
+    for i in range(1, horizon + 1):
+        n = max(0, L + 1 - i)
+        toeplitz[i - 1, :n] = w[i: i + n]
+    history = ca.Function("gl_history", [buffer], [scale * ca.mtimes(ca.DM(toeplitz), buffer[::-1])],
+                          ["buffer"], ["terms"])
+    return push, history

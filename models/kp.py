@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from hystmpc.models.base import SteppedModel, check_smoothing, smooth_function, symbolic
+from hystmpc.models.base import SteppedModel, builtin_max, builtin_min, check_smoothing, clip, smooth_function, symbolic
 from hystmpc.models.smooth import smooth_clip, smooth_max, smooth_min
 
 
@@ -110,7 +110,12 @@ class KrasnoselskiiPokrovskii(SteppedModel):
         return np.concatenate(([u0], ridge(u0 - self.rho2, self.delta)))
 
     def kernels_step(self, state, u: float) -> np.ndarray:
-        """Kernel outputs ξ after moving the input to ``u`` (eq. (6))."""
+        """Kernel outputs ξ after moving the input to ``u`` (eq. (6)); also on CasADi expressions."""
+        if symbolic(state) or symbolic(u):
+            u_last, xi = state[0], state[1:]
+            rising = builtin_max(xi, clip(-1.0 + 2.0 * (u - ca.DM(self.rho2)) / self.delta, -1.0, 1.0))
+            falling = builtin_min(xi, clip(-1.0 + 2.0 * (u - ca.DM(self.rho1)) / self.delta, -1.0, 1.0))
+            return ca.if_else(u > u_last, rising, ca.if_else(u < u_last, falling, xi))
         u_last, xi = float(state[0]), np.asarray(state[1:], float)
         if u > u_last:
             return np.maximum(xi, ridge(u - self.rho2, self.delta))
@@ -121,6 +126,11 @@ class KrasnoselskiiPokrovskii(SteppedModel):
     def step(self, state, u: float, weights=None) -> tuple[np.ndarray, float]:
         """Exact step to input ``u``; returns ``(state, κ)``. ``weights`` replaces the density
         (for adaptive estimates of it)."""
+        if symbolic(state) or symbolic(u):
+            if weights is not None:
+                raise ValueError("weights applies to NumPy states only")
+            xi = self.kernels_step(state, u)
+            return ca.vertcat(u, xi), ca.dot(ca.DM(self.weights), xi)
         if not np.isfinite(u):
             raise ValueError(f"u must be finite, got {u}")
         xi = self.kernels_step(state, u)
@@ -193,3 +203,35 @@ class KrasnoselskiiPokrovskii(SteppedModel):
             else:
                 lo = mid
         return self.step(state, hi)[0], hi
+
+    def bisection_inverse(self, state, y_target, u_min: float = -1.0, u_max: float = 1.0,
+                          iterations: int = 44):
+        """An input that reaches ``y_target`` from ``state`` by bisection, and the state after
+        it: ``(state, u)``, on CasADi expressions (the same arithmetic as the generated C).
+
+        The output moves monotonically with the input in the direction of the target, so
+        ``iterations`` halvings of ``[u_last, bound]`` (width at most 2) find the input where the
+        target is first reached to ``2^-iterations`` of that width (44: about 1e-13); a target
+        beyond the bound gives the bound, as :meth:`inverse_step` does. The halvings run as a
+        CasADi fold: generated C keeps one loop, not ``iterations`` copies.
+        """
+        n = self.n_kernels + 1
+        x, target, up = ca.SX.sym("state", n), ca.SX.sym("target"), ca.SX.sym("up")
+        lo, hi = ca.SX.sym("lo"), ca.SX.sym("hi")
+
+        def reached(u):
+            y = self.step(x, u)[1]
+            return ca.if_else(up, y >= target, y <= target)
+        mid = 0.5 * (lo + hi)
+        halve = ca.Function("kp_bisect", [ca.vertcat(lo, hi), ca.vertcat(x, target, up)],
+                            [ca.if_else(reached(mid), ca.vertcat(lo, mid), ca.vertcat(mid, hi))])
+        x, target = ca.MX.sym("state", n), ca.MX.sym("target")  # MX: the fold stays a call
+        u_last = clip(x[0], u_min, u_max)
+        rising = target > self.step(x, u_last)[1]
+        bound = ca.if_else(rising, u_max, u_min)
+        start = ca.vertcat(u_last, bound)
+        bracket = halve.fold(iterations)(start, ca.vertcat(x, target, rising))
+        u = ca.if_else(ca.if_else(rising, self.step(x, bound)[1] >= target, self.step(x, bound)[1] <= target),
+                       bracket[1], bound)
+        inverse = ca.Function("kp_inverse", [x, target], [self.step(x, u)[0], u], {"never_inline": True})
+        return inverse(state, y_target)

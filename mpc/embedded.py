@@ -8,16 +8,16 @@
   fallback and the bound and rate clip; and
 * ``prepare(mem) -> mem_next``: what does not need the next measurement: the EKF's time
   update with the input just sent and, for an input-driven model, the exact hysteresis and
-  dead-time queue moved by it,
+  dead-time queue (and the creep memory) moved by it,
 
 over one flat memory vector (:class:`MemoryLayout`). They repeat
 :meth:`NmpcController.step <hystmpc.mpc.controller.NmpcController.step>` operation by
 operation (``feedback`` after ``prepare`` is one Python step), so generated C does what the
 Python controller does. Supported: a :class:`StateObserver` (EKF on ``[x; d]``) or a
-:class:`MemoryObserver` without creep (the exact hysteresis and dead time, with or without an
-EKF), with the condensed multiple-shooting RTI step; the inverse model and the observer's
-``initial_state`` must accept CasADi expressions (the bench writes them so). What cannot be
-generated raises :class:`NotGeneratable`, saying why.
+:class:`MemoryObserver` (the exact hysteresis, dead time and creep over a fixed window, with
+or without an EKF), with the condensed multiple-shooting or the single-shooting RTI step;
+the inverse model and the observer's ``initial_state`` must accept CasADi expressions (the
+bench writes them so). What cannot be generated raises :class:`NotGeneratable`, saying why.
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from hystmpc.models.fractional import window_functions
 from hystmpc.mpc.observer import Estimate, MemoryObserver, StateObserver
 from hystmpc.mpc.rti import QP_TOLERANCE
 
@@ -161,16 +162,22 @@ class _StateEstimator:
 class _MemoryEstimator:
     """A :class:`MemoryObserver` as expressions: the exact hysteresis and dead time on the
     inputs sent, and the EKF (on the dynamics, or on the whole model with the exact states
-    held) if there is one. Creep models are not supported yet."""
+    held) if there is one; the creep memory as the last ``window + 1`` hysteresis outputs."""
 
     def __init__(self, controller):
         obs, model = controller.observer, controller.model
-        if obs.creeping:
-            raise NotGeneratable("a generated controller does not run a creep memory (the GL history) yet")
         self.observer, self.model, self.memory, self.ekf = obs, model, obs.memory, obs.ekf
         hysteresis = self.memory.hysteresis
         n_h, D = len(hysteresis.initial_state(obs.rest_input)), self.memory.delay_samples
         parts = [("hysteresis", n_h), ("queue", D)]
+        self.creep = None
+        if obs.creeping:
+            if obs.creep_window is None:
+                raise NotGeneratable("a generated controller keeps a fixed creep memory: the whole history grows "
+                                     "without bound; give the creep sums a window (dea: --set memory.window=200)")
+            self.creep = window_functions(-self.memory.creep_order, model.sample_period, obs.creep_window,
+                                          controller.horizon)
+            parts.append(("creep", obs.creep_window + 1))
         if self.ekf is not None:
             n_e, nd = self.ekf.model.nx, model.nd
             parts += [("x", n_e), ("d", nd), ("P", (n_e + nd) ** 2)]
@@ -199,6 +206,8 @@ class _MemoryEstimator:
             raise NotGeneratable(f"the exact step of {type(self.memory.hysteresis).__name__} does not accept CasADi "
                                  f"expressions ({type(exc).__name__}: {exc})") from None
         out = {"hysteresis": hysteresis, "queue": queue_next}
+        if self.creep is not None:
+            out["creep"], h = self.creep[0](part("creep"), h)
         if self.ekf is not None:
             ekf, n_e = self.ekf, self.ekf.model.nx
             n = n_e + self.model.nd
@@ -231,6 +240,10 @@ class _MemoryEstimator:
         xd = ca.if_else(lost, x_rest, xd_update)
         P = ca.if_else(lost, P_rest, P_update)
         x_e, d = _rows(xd, 0, n_e), _rows(xd, n_e, n)
+        if self.creep is not None:  # the creep model's condition: [hysteresis, x_dyn, d, history]
+            history = self.creep[1](part("creep"))
+            return ({"x": x_e, "d": d, "P": P}, Estimate(x_e, d, hysteresis, history, queue),
+                    ca.vertcat(hysteresis, x_e, d, history), lost, predicted)
         x = ca.vertcat(_rows(x_e, 0, n_dyn), hysteresis, queue)
         return ({"x": x_e, "d": d, "P": P}, Estimate(x, d, hysteresis, None, queue), ca.vertcat(x, d), lost,
                 predicted)
@@ -248,10 +261,10 @@ def _estimator(controller):
 
 def _check(controller) -> None:
     problem = controller.problem
-    if not (getattr(problem, "multiple_shooting", False) and getattr(problem, "condensed", False)):
-        raise NotGeneratable("a generated controller needs the condensed multiple-shooting RTI step "
-                         "(nmpc.solver=rti with solver.rti.condensed=true)")
-    if problem.rti is None or problem.rti.is_a("External"):
+    if getattr(problem, "multiple_shooting", False) and not getattr(problem, "condensed", False):
+        raise NotGeneratable("a generated controller needs the condensed RTI step "
+                             "(nmpc.solver=rti with solver.rti.condensed=true)")
+    if getattr(problem, "rti", None) is None or problem.rti.is_a("External"):
         raise NotGeneratable("build the controller with nmpc.solver=rti: its RTI step goes into the generated code")
 
 
@@ -262,14 +275,14 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     ----------
     controller : NmpcController
         Built with ``nmpc.solver=rti``, a :class:`StateObserver` or a :class:`MemoryObserver`
-        (without creep) and, for ``warm_start='inverse'`` or ``r_input > 0``, an inverse
+        (a creep memory with a window) and, for ``warm_start='inverse'`` or ``r_input > 0``, an inverse
         model that accepts CasADi expressions (as the observer's ``initial_state`` must).
     name : str
         Prefix of the Functions' names (``<name>_feedback``, ``<name>_prepare``).
     """
     estimator = _estimator(controller)
     _check(controller)
-    model, problem, s, bounds = controller.model, controller.problem, controller.settings, controller.bounds
+    problem, s, bounds = controller.problem, controller.settings, controller.bounds
     N = controller.horizon
     layout = MemoryLayout(estimator.parts, N, estimator.initial_values)
     sl = layout.slices
@@ -288,7 +301,7 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
         ["mem_next"])
 
     # feedback
-    z = ca.MX.sym("z", model.nz)
+    z = ca.MX.sym("z", len(controller.sensor_names))
     window = ca.MX.sym("ref_preview", N + 1)
     estimated, est, condition, lost, predicted = estimator.feedback(part, z, started)
 

@@ -13,6 +13,7 @@ Both restart from the sensors when the estimate stops being finite, and count it
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -20,7 +21,7 @@ import casadi as ca
 import numpy as np
 
 from hystmpc.models.base import symbolic
-from hystmpc.models.fractional import gl_weights
+from hystmpc.models.fractional import gl_weights, window_functions
 from hystmpc.models.prediction import CreepPredictionModel, InputMemory, PredictionModel
 from hystmpc.mpc.estimator import DisturbanceEKF
 
@@ -144,6 +145,10 @@ class MemoryObserver:
             self.initial_covariance[held] = 0.0
         self.creep_window, self.rest_input = creep_window, float(rest_input)
         self.creeping = isinstance(model, CreepPredictionModel)
+        self.exact_step = exact_step(self.memory.hysteresis, rest_input)
+        self._history: dict[int, ca.Function] = {}
+        if self.creeping and creep_window is not None:  # fixed-size sums, as a generated controller runs them
+            self._push = window_functions(-self.memory.creep_order, model.sample_period, creep_window, 1)[0]
         self.reset()
 
     def reset(self) -> None:
@@ -152,7 +157,8 @@ class MemoryObserver:
         self.hysteresis_state = mem.hysteresis.initial_state(self.rest_input)
         self.queue = [self.rest_input] * mem.delay_samples
         self.creep = None
-        if self.creeping:
+        self.creep_buffer = np.zeros(self.creep_window + 1) if self.creeping and self.creep_window is not None else None
+        if self.creeping and self.creep_buffer is None:
             from hystmpc.models.fractional import GrunwaldLetnikov
             self.creep = GrunwaldLetnikov(-mem.creep_order, self.model.sample_period, self.creep_window)
         self.x = np.zeros(mem.n_dynamic)
@@ -177,9 +183,12 @@ class MemoryObserver:
         else:
             self.queue.append(float(u_last))
             u_in = self.queue.pop(0)
-            self.hysteresis_state, h = self.memory.hysteresis.step(self.hysteresis_state, u_in)
+            self.hysteresis_state, h = self.exact_step(self.hysteresis_state, u_in)
             if self.creep is not None:
                 h = self.creep.push(h)
+            elif self.creep_buffer is not None:
+                buffer, h = self._push(self.creep_buffer, h)
+                self.creep_buffer, h = np.asarray(buffer, float).ravel(), float(h)
             if self.ekf is not None:
                 self.ekf.predict([h] if self.split else [u_last])
         self._hold()
@@ -204,6 +213,11 @@ class MemoryObserver:
     def estimate(self, horizon: int) -> Estimate:
         """The current estimate (with the creep history over ``horizon`` samples, if any)."""
         history = self.creep.history_terms(horizon) if self.creep is not None else None
+        if self.creep_buffer is not None:
+            if horizon not in self._history:
+                self._history[horizon] = window_functions(-self.memory.creep_order, self.model.sample_period,
+                                                          self.creep_window, horizon)[1]
+            history = np.asarray(self._history[horizon](self.creep_buffer), float).ravel()
         x = self.x.copy() if self.creeping else self._state(self.x)
         return Estimate(x, self.d.copy(), self.hysteresis_state.copy(), history, np.array(self.queue))
 
@@ -213,6 +227,25 @@ class MemoryObserver:
         if self.creeping:
             return np.concatenate((estimate.hysteresis, estimate.x, estimate.d, estimate.history))
         return np.concatenate((estimate.x, estimate.d))
+
+
+def exact_step(hysteresis, rest_input: float = 0.0) -> Callable:
+    """``(state, u) -> (state, y)`` of ``hysteresis`` in NumPy: its exact step evaluated as a
+    CasADi Function where the step accepts CasADi expressions (the same arithmetic as a
+    generated controller, to the last bit), else the model's own ``step``."""
+    n = len(hysteresis.initial_state(rest_input))
+    state, u = ca.SX.sym("state", n), ca.SX.sym("u")
+    try:
+        with warnings.catch_warnings():  # a NumPy-only step on a CasADi symbol warns before it fails
+            warnings.simplefilter("ignore")
+            fun = ca.Function("exact_step", [state, u], [*hysteresis.step(state, u)])
+    except Exception:  # noqa: BLE001 - a NumPy-only step fails in many ways: use it as it is
+        return hysteresis.step
+
+    def step(x, v):
+        x_next, y = fun(x, v)
+        return np.asarray(x_next, float).ravel(), float(y)
+    return step
 
 
 def memory_inverse(memory: InputMemory, sample_period: float) -> Callable[[Estimate, np.ndarray], np.ndarray]:
@@ -231,10 +264,34 @@ def memory_inverse(memory: InputMemory, sample_period: float) -> Callable[[Estim
     steady, mode, hysteresis = memory.steady_input, memory.disturbance, memory.hysteresis
     alpha = memory.creep_order
 
+    functions: dict[tuple, ca.Function | None] = {}
+
+    def as_function(est: Estimate, n: int) -> ca.Function | None:
+        """The symbolic inverse for ``n`` references as a Function (None: no CasADi form)."""
+        sizes = tuple(0 if v is None else len(v) for v in (est.x, est.d, est.hysteresis, est.history, est.queue))
+        if (n, sizes) not in functions:
+            names = ("x", "d", "hysteresis", "history", "queue")
+            parts = [ca.MX.sym(name, size) for name, size in zip(names, sizes, strict=True)]
+            refs = ca.MX.sym("refs", n)
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    out = symbolic_inverse(Estimate(parts[0], parts[1], parts[2], parts[3] if sizes[3] else None,
+                                                    parts[4] if sizes[4] else None), refs)
+                functions[n, sizes] = ca.Function("memory_inverse", [*parts, refs], [out])
+            except Exception:  # noqa: BLE001 - no CasADi form: the NumPy steps below
+                functions[n, sizes] = None
+        return functions[n, sizes]
+
     def inverse(est: Estimate, refs) -> np.ndarray:
         if symbolic(est.hysteresis):
             return symbolic_inverse(est, refs)
         refs = np.asarray(refs, float)
+        fun = as_function(est, len(refs))
+        if fun is not None:  # the arithmetic of a generated controller
+            empty = np.zeros(0)
+            return np.asarray(fun(est.x, est.d, est.hysteresis, empty if est.history is None else est.history,
+                                  empty if est.queue is None else est.queue, refs), float).ravel()
         n, D = len(refs), memory.delay_samples
         reached = refs[np.minimum(np.arange(n) + D, n - 1)]  # the input acts after the dead time
         d = float(est.d[0]) if len(est.d) else 0.0
@@ -263,8 +320,6 @@ def memory_inverse(memory: InputMemory, sample_period: float) -> Callable[[Estim
         """The same steps on CasADi expressions, for a generated controller: an unreachable
         target (the hysteresis model's symbolic ``inverse_step`` gives a NaN input) holds the
         input and the state."""
-        if alpha:
-            raise ValueError("the creep inverse has no CasADi form yet")
         n, D = refs.shape[0], memory.delay_samples
         reached = ca.vertcat(*[refs[min(j + D, n - 1)] for j in range(n)])
         d = est.d[0] if est.d.numel() else 0.0
@@ -276,12 +331,18 @@ def memory_inverse(memory: InputMemory, sample_period: float) -> Callable[[Estim
         sym_state, sym_target = ca.SX.sym("state", state.numel()), ca.SX.sym("target")
         step = ca.Function("hysteresis_inverse_step", [sym_state, sym_target],  # one Function, called per sample
                            [*hysteresis.inverse_step(sym_state, sym_target)])
-        u, out = ca.MX(np.nan), []
+        c = gl_weights(-alpha, n) if alpha else None
+        u, out, ws = ca.MX(np.nan), [], []
         for j in range(n):
-            state_next, u_next = step(state, targets[j])
+            h = targets[j]
+            if c is not None:  # the creep inverse, as in the NumPy steps above
+                past = sum(c[i] * ws[j - i] for i in range(1, j + 1))
+                h = (h - est.history[j]) / sample_period**alpha - past
+            state_next, u_next = step(state, h)
             reachable = ca.fabs(u_next) < ca.inf
             state = ca.if_else(reachable, state_next, state)
             u = ca.if_else(reachable, u_next, u)
+            ws.append(hysteresis.output(state))
             out.append(u)
         return ca.vertcat(*out)
     return inverse

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from hystmpc.models.base import symbolic
 from hystmpc.models.fckp import Fckp, FckpParams
 from hystmpc.models.integrators import rk4
 from hystmpc.models.prediction import CreepPredictionModel, Dynamics, PredictionModel, build_prediction_model
@@ -83,8 +84,9 @@ def mechanics_rhs(p: DeaParams, x, w, extra_acceleration, tanh=np.tanh) -> list:
 
 def steady_output_input(p: DeaParams, y):
     """The FCKP output W that holds the displacement at ``y`` at rest: ``f(y, 0) + g(y) W = 0``."""
-    y = np.asarray(y, float)
-    return (y + p.stiffening * y**3) / (1 + p.gain_variation * np.tanh(y / 2.0))
+    tanh = ca.tanh if symbolic(y) else np.tanh
+    y = y if symbolic(y) else np.asarray(y, float)
+    return (y + p.stiffening * y**3) / (1 + p.gain_variation * tanh(y / 2.0))
 
 
 def prediction_model(p: DeaParams, eps: float, direction_eps: float | None = None) -> CreepPredictionModel:

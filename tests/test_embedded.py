@@ -19,10 +19,10 @@ def _pam(*assignments):
     return bench, config
 
 
-def _python_and_generated(bench_name: str, scenario: str, duration: float):
+def _python_and_generated(bench_name: str, scenario: str, duration: float, assignments=()):
     """The Python controller's run and its Functions' run (in-process) on the same plant."""
     bench = get_bench(bench_name)
-    config = bench.configure(["nmpc.solver=rti"])
+    config = bench.configure(["nmpc.solver=rti", *assignments])
     python = bench.run(scenario, "nmpc", config, duration=duration)
     prepared = bench.prepare(scenario, "nmpc", config)
     functions = FunctionController(prepared.controller, *controller_functions(prepared.controller))
@@ -30,15 +30,18 @@ def _python_and_generated(bench_name: str, scenario: str, duration: float):
     return python, generated, functions
 
 
-@pytest.mark.parametrize(("bench_name", "scenario", "duration", "moves"), [
-    ("pam", "square-20", 4.0, 1.0),  # the EKF on the whole state, pam's inverse and rest state
-    ("compliant", "sine-2", 2.0, 0.05),  # power-function turning points, Newton steps for θ(s)
+@pytest.mark.parametrize(("bench_name", "scenario", "duration", "moves", "assignments"), [
+    ("pam", "square-20", 4.0, 1.0, ()),  # the EKF on the whole state, pam's inverse and rest state
+    ("compliant", "sine-2", 2.0, 0.05, ()),  # power-function turning points, Newton steps for θ(s)
     # the exact memory without sensors: the parametric hysteresis run exactly on the currents
     # sent (Lambert W as Halley steps), the inverse through the look-up table
-    ("reluctance", "reversals-1.75mm", 0.3, 1.0),
+    ("reluctance", "reversals-1.75mm", 0.3, 1.0, ()),
+    # the exact KP memory, the creep memory over a window, the EKF on the mechanics, single
+    # shooting, and the inverse through the creep inverse and the KP bisection
+    ("dea", "square", 3.0, 2.0, ("memory.window=50",)),
 ])
-def test_the_functions_repeat_the_python_controller(bench_name, scenario, duration, moves):
-    python, generated, functions = _python_and_generated(bench_name, scenario, duration)
+def test_the_functions_repeat_the_python_controller(bench_name, scenario, duration, moves, assignments):
+    python, generated, functions = _python_and_generated(bench_name, scenario, duration, assignments)
     assert np.max(np.abs(python.input - generated.input)) <= 1e-9
     assert np.max(np.abs(python.predicted[1:] - generated.predicted[1:])) <= 1e-9
     assert functions.stats()["failures"] == python.solver["failures"]
@@ -88,7 +91,7 @@ def test_memory_layout_packs_the_named_parts_in_order():
 
 def test_controllers_without_a_casadi_form_are_refused_with_the_reason():
     bench = get_bench("dea")
-    with pytest.raises(ValueError, match="does not run a creep memory"):
+    with pytest.raises(ValueError, match="give the creep sums a window"):  # the whole history: unbounded
         controller_functions(bench.build_controller("nmpc", bench.configure(["nmpc.solver=rti"])))
     bench, config = _pam()
     numpy_only = bench.build_controller("nmpc", config)
