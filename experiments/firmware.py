@@ -230,8 +230,11 @@ WARM_START_DOCS = {
 }
 
 ALLOCATION = {
-    "daqp": "No malloc in this code, but the QP library it calls (DAQP, solver.rti.qp=daqp) allocates\n"
-            "   its workspace in each solve (malloc/free); solver.rti.qp=ipm allocates nothing.",
+    "daqp": "\n   No malloc in this code, but the QP library it calls (DAQP, solver.rti.qp=daqp) allocates\n"
+            "   its workspace in each solve (malloc/free). For firmware, compile DAQP's sources with\n"
+            "   -Dmalloc={name}_qp_malloc -Dcalloc={name}_qp_calloc -Dfree={name}_qp_free and link\n"
+            "   {name}_qp_arena.c: a static arena of {arena} bytes, exactly what one solve takes, emptied\n"
+            "   when the solve frees it (hystmpc codegen --target cortex-m7 does so).",
     "ipm": "No malloc anywhere (solver.rti.qp=ipm: the QP is generated code too).",
 }
 
@@ -301,6 +304,13 @@ def write_controller(bench: Bench, config: dict, out: Path, name: str | None = N
                   failures=layout.slices["failures"].start, u_last=layout.slices["u_last"].start,
                   resets=layout.slices["estimator_resets"].start,
                   **sizes)
+    dims = _daqp_dimensions(controller)
+    if dims is not None:
+        doubles = daqp_arena_doubles(*dims)
+        fields["allocation"] = fields["allocation"].format(name=name, arena=8 * doubles)
+        (out / f"{name}_qp_arena.c").write_text(QP_ARENA_C.format(
+            name=name, NAME=NAME, n=dims[0], m=dims[1], ms=dims[2], doubles=doubles, arena=8 * doubles,
+            daqp_version=DAQP_VERSION))
     (out / f"{name}.h").write_text(HEADER.format(**fields))
     (out / f"{name}.c").write_text(SOURCE.format(**fields))
     (out / "main.c").write_text(MAIN_C.format(**fields))
@@ -440,10 +450,36 @@ def verify_controller(bench: Bench, config: dict, out: Path, name: str, duration
     loop = {k: float(v) for k, v in (line.split() for line in done.stdout.split("\n") if line)}
     loop_inputs = np.loadtxt(out / "inputs.txt", ndmin=2)[:, 0]
     loop["max_input_difference"] = float(np.max(np.abs(loop_inputs - c_run.input)))
+    if (out / f"{name}_qp_arena.c").exists():  # the firmware's QP: DAQP's sources on the static arena
+        loop["static_qp_max_input_difference"] = float(np.max(np.abs(_static_qp_loop(out, name, recording)
+                                                                      - c_run.input)))
     return {"scenario": scenario.name, "samples": int(len(c_run.input)), "max_input_difference": diff,
             "rmse": {"python": python.metrics["rmse"], "c": c_run.metrics["rmse"]},
             "failures": {"python": python.solver["failures"], "c": c_run.solver["failures"]},
             "sample_period_us": 1e6 * bench.sample_period, "example_loop": loop}
+
+
+def _static_qp_loop(out: Path, name: str, recording: Path) -> np.ndarray:
+    """The example loop built as the firmware is (DAQP's own sources, their malloc from
+    ``<name>_qp_arena.c``) for this machine, run on ``recording``; returns its inputs."""
+    cc = c_compiler()
+    build = out / "static-qp"
+    build.mkdir(exist_ok=True)
+    daqp = daqp_sources()
+    shutil.copytree(daqp / "include", build / "include" / "daqp", dirs_exist_ok=True)
+    flags = [*COMPILE_FLAGS, f"-I{out}", f"-I{build / 'include'}", f"-I{build / 'include' / 'daqp'}"]
+    arena = [f"-Dmalloc={name}_qp_malloc", f"-Dcalloc={name}_qp_calloc", f"-Dfree={name}_qp_free"]
+    objects = []
+    for source in sorted((daqp / "src").glob("*.c")):
+        objects.append(str(build / f"daqp_{source.stem}.o"))
+        _run([*cc, *flags, *arena, "-c", str(source), "-o", objects[-1]], "static-QP build of DAQP")
+    program = build / f"{name}_main"
+    _run([*cc, *flags, *(str(out / f) for f in ("main.c", f"{name}.c", f"{name}_nmpc.c", f"{name}_qp_arena.c")),
+          *objects, "-o", str(program), "-lm"], "static-QP build")
+    done = subprocess.run([str(program), str(recording), str(build / "inputs.txt")], capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"{program.name} (static QP) failed: {done.stderr.strip()[:500]}")
+    return np.loadtxt(build / "inputs.txt", ndmin=2)[:, 0]
 
 
 def _recorded_sensors(bench: Bench, scenario, config: dict, run, python_controller) -> np.ndarray:
@@ -463,9 +499,9 @@ def _recorded_sensors(bench: Bench, scenario, config: dict, run, python_controll
 CORTEX_M7_FLAGS = ("-mcpu=cortex-m7", "-mfpu=fpv5-d16", "-mfloat-abi=hard", "-mthumb", "-Os",
                    "-ffunction-sections", "-fdata-sections", "-ffp-contract=off")
 """A Cortex-M7 with a double-precision FPU, optimised for size; unused functions dropped at link."""
-DAQP_VERSION = "0.11.0"
-"""DAQP release whose C sources a cross build compiles (CasADi's generated call needs
-``EXIT_OPTIMAL`` defined as this release's ``DAQP_EXIT_OPTIMAL``)."""
+DAQP_VERSION = "0.5.1"
+"""DAQP release whose C sources a cross build compiles: the one inside CasADi 3.8.2 (its
+headers are 0.5.1's), so the firmware's QP computes what the host build's does."""
 
 FIRMWARE_C = r"""/* A bare-metal loop around the controller, for the Cortex-M7 size check: what the
    firmware links (init, step, prepare, a static controller). The sensors and the preview
@@ -487,6 +523,61 @@ int main(void) {{
   }}
 }}
 """
+
+
+QP_ARENA_C = r"""/* {name}_qp_arena.c: malloc, calloc and free for DAQP's sources, from a static arena
+   (compile DAQP with -Dmalloc={name}_qp_malloc -Dcalloc={name}_qp_calloc -Dfree={name}_qp_free).
+   DAQP allocates its workspace at the start of each solve and frees all of it at the end; the
+   arena holds exactly one solve's allocations for this QP ({n} variables, {m} constraints of
+   which {ms} simple bounds: {arena} bytes, counted from DAQP {daqp_version}'s allocation code) and
+   is emptied when the last block is freed. A request beyond it returns NULL, which cannot happen
+   for this controller's QP. */
+#include <stddef.h>
+
+#define {NAME}_QP_ARENA_DOUBLES {doubles}
+static double arena[{NAME}_QP_ARENA_DOUBLES];
+static size_t used, live;
+
+void* {name}_qp_malloc(size_t bytes) {{
+  size_t doubles = (bytes + sizeof(double) - 1) / sizeof(double);
+  if (doubles > {NAME}_QP_ARENA_DOUBLES - used) return NULL;
+  void* block = &arena[used];
+  used += doubles;
+  ++live;
+  return block;
+}}
+
+void* {name}_qp_calloc(size_t count, size_t size) {{
+  unsigned char* block = {name}_qp_malloc(count * size);
+  if (block) for (size_t i = 0; i < count * size; ++i) block[i] = 0;
+  return block;
+}}
+
+void {name}_qp_free(void* block) {{
+  if (block && live > 0 && --live == 0) used = 0;
+}}
+"""
+
+
+def daqp_arena_doubles(n: int, m: int, ms: int) -> int:
+    """Doubles DAQP 0.5.1 allocates in one solve of a dense QP with ``n`` variables and ``m``
+    constraints, ``ms`` of them simple bounds (no binaries, no soft constraints), each block
+    rounded up to whole doubles: the workspace (``allocate_daqp_workspace``) and the LDP
+    (``setup_daqp_ldp`` with H and f given)."""
+    def ints(k: int) -> int:
+        return (4 * k + 7) // 8
+    workspace = 5 * (n + 1) + ints(n + 1) + (n + 1) * (n + 2) // 2 + 2 * n
+    ldp = 3 * m + n * (m - ms) + ints(m) + n * (n + 1) // 2 + n
+    return workspace + ldp
+
+
+def _daqp_dimensions(controller) -> tuple[int, int, int] | None:
+    """``(n, m, ms)`` of the DAQP QP in the controller's RTI step (None: it calls no DAQP)."""
+    for fun in controller.problem.rti.find_functions():
+        if fun.class_name() == "DaqpInterface":
+            n, na = fun.sparsity_in("h").size1(), fun.sparsity_in("a").size1()
+            return n, n + na, n
+    return None
 
 
 def daqp_sources() -> Path:
@@ -537,19 +628,31 @@ def cross_compile(out: Path, name: str, compiler: str = "arm-none-eabi-gcc") -> 
     sources = [build / "firmware.c", out / f"{name}.c", out / f"{name}_nmpc.c"]
     flags = [*CORTEX_M7_FLAGS, f"-I{out}"]
     uses_daqp = "daqp/api.h" in (out / f"{name}_nmpc.c").read_text()
-    if uses_daqp:
+    objects = []
+    if uses_daqp:  # DAQP's sources, their malloc/calloc/free taken from the controller's static arena
         daqp = daqp_sources()
         headers = build / "include"
         shutil.copytree(daqp / "include", headers / "daqp", dirs_exist_ok=True)
-        flags += [f"-I{headers}", f"-I{headers / 'daqp'}", "-DEXIT_OPTIMAL=DAQP_EXIT_OPTIMAL"]
-        sources += sorted((daqp / "src").glob("*.c"))
+        flags += [f"-I{headers}", f"-I{headers / 'daqp'}"]
+        sources.append(out / f"{name}_qp_arena.c")
+        arena = [f"-Dmalloc={name}_qp_malloc", f"-Dcalloc={name}_qp_calloc", f"-Dfree={name}_qp_free"]
+        for source in sorted((daqp / "src").glob("*.c")):
+            objects.append(build / f"daqp_{source.stem}.o")
+            _run([gcc, *flags, *arena, "-c", str(source), "-o", str(objects[-1])], "cortex-m7 build of DAQP")
     elf = build / f"{name}.elf"
-    cmd = [gcc, *flags, *map(str, sources), "--specs=nosys.specs", "-Wl,--gc-sections", "-lm", "-o", str(elf)]
-    done = subprocess.run(cmd, capture_output=True, text=True)
-    if done.returncode != 0:
-        raise RuntimeError(f"cortex-m7 build failed: {done.stderr.strip()[-1500:]}")
+    _run([gcc, *flags, *map(str, sources), *map(str, objects), "--specs=nosys.specs", "-Wl,--gc-sections", "-lm",
+          "-o", str(elf)], "cortex-m7 build")
     sized = subprocess.run([size_tool, str(elf)], capture_output=True, text=True, check=True).stdout.split("\n")
     text, data, bss = (int(v) for v in sized[1].split()[:3])
+    nm = shutil.which(compiler.replace("gcc", "nm"))
+    symbols = subprocess.run([nm, str(elf)], capture_output=True, text=True, check=True).stdout.split() if nm else []
     return {"target": "cortex-m7", "elf": str(elf), "text": text, "data": data, "bss": bss,
+            "heap": bool({"malloc", "_malloc_r", "_sbrk", "_sbrk_r"} & set(symbols)),
             "flags": " ".join(CORTEX_M7_FLAGS), "qp": f"DAQP {DAQP_VERSION} sources" if uses_daqp else "generated",
             "compiler": subprocess.run([gcc, "-dumpversion"], capture_output=True, text=True).stdout.strip()}
+
+
+def _run(cmd: list[str], what: str) -> None:
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"{what} failed: {done.stderr.strip()[-1500:]}")
