@@ -465,14 +465,9 @@ def _static_qp_loop(out: Path, name: str, recording: Path) -> np.ndarray:
     cc = c_compiler()
     build = out / "static-qp"
     build.mkdir(exist_ok=True)
-    daqp = daqp_sources()
-    shutil.copytree(daqp / "include", build / "include" / "daqp", dirs_exist_ok=True)
-    flags = [*COMPILE_FLAGS, f"-I{out}", f"-I{build / 'include'}", f"-I{build / 'include' / 'daqp'}"]
-    arena = [f"-Dmalloc={name}_qp_malloc", f"-Dcalloc={name}_qp_calloc", f"-Dfree={name}_qp_free"]
-    objects = []
-    for source in sorted((daqp / "src").glob("*.c")):
-        objects.append(str(build / f"daqp_{source.stem}.o"))
-        _run([*cc, *flags, *arena, "-c", str(source), "-o", objects[-1]], "static-QP build of DAQP")
+    flags = [*COMPILE_FLAGS, f"-I{out}"]
+    include, objects = _daqp_on_arena(cc, flags, name, build)
+    flags += include
     program = build / f"{name}_main"
     _run([*cc, *flags, *(str(out / f) for f in ("main.c", f"{name}.c", f"{name}_nmpc.c", f"{name}_qp_arena.c")),
           *objects, "-o", str(program), "-lm"], "static-QP build")
@@ -629,18 +624,12 @@ def cross_compile(out: Path, name: str, compiler: str = "arm-none-eabi-gcc") -> 
     flags = [*CORTEX_M7_FLAGS, f"-I{out}"]
     uses_daqp = "daqp/api.h" in (out / f"{name}_nmpc.c").read_text()
     objects = []
-    if uses_daqp:  # DAQP's sources, their malloc/calloc/free taken from the controller's static arena
-        daqp = daqp_sources()
-        headers = build / "include"
-        shutil.copytree(daqp / "include", headers / "daqp", dirs_exist_ok=True)
-        flags += [f"-I{headers}", f"-I{headers / 'daqp'}"]
+    if uses_daqp:
+        include, objects = _daqp_on_arena([gcc], flags, name, build)
+        flags += include
         sources.append(out / f"{name}_qp_arena.c")
-        arena = [f"-Dmalloc={name}_qp_malloc", f"-Dcalloc={name}_qp_calloc", f"-Dfree={name}_qp_free"]
-        for source in sorted((daqp / "src").glob("*.c")):
-            objects.append(build / f"daqp_{source.stem}.o")
-            _run([gcc, *flags, *arena, "-c", str(source), "-o", str(objects[-1])], "cortex-m7 build of DAQP")
     elf = build / f"{name}.elf"
-    _run([gcc, *flags, *map(str, sources), *map(str, objects), "--specs=nosys.specs", "-Wl,--gc-sections", "-lm",
+    _run([gcc, *flags, *map(str, sources), *objects, "--specs=nosys.specs", "-Wl,--gc-sections", "-lm",
           "-o", str(elf)], "cortex-m7 build")
     sized = subprocess.run([size_tool, str(elf)], capture_output=True, text=True, check=True).stdout.split("\n")
     text, data, bss = (int(v) for v in sized[1].split()[:3])
@@ -650,6 +639,22 @@ def cross_compile(out: Path, name: str, compiler: str = "arm-none-eabi-gcc") -> 
             "heap": bool({"malloc", "_malloc_r", "_sbrk", "_sbrk_r"} & set(symbols)),
             "flags": " ".join(CORTEX_M7_FLAGS), "qp": f"DAQP {DAQP_VERSION} sources" if uses_daqp else "generated",
             "compiler": subprocess.run([gcc, "-dumpversion"], capture_output=True, text=True).stdout.strip()}
+
+
+def _daqp_on_arena(cc: list[str], flags: list[str], name: str, build: Path) -> tuple[list[str], list[str]]:
+    """Compile DAQP's sources into ``build`` with ``cc`` and ``flags``, their malloc, calloc and
+    free taken from ``<name>_qp_arena.c``; returns the include flags for DAQP's headers and the
+    object files."""
+    daqp = daqp_sources()
+    headers = build / "include"
+    shutil.copytree(daqp / "include", headers / "daqp", dirs_exist_ok=True)
+    include = [f"-I{headers}", f"-I{headers / 'daqp'}"]
+    arena = [f"-Dmalloc={name}_qp_malloc", f"-Dcalloc={name}_qp_calloc", f"-Dfree={name}_qp_free"]
+    objects = []
+    for source in sorted((daqp / "src").glob("*.c")):
+        objects.append(str(build / f"daqp_{source.stem}.o"))
+        _run([*cc, *flags, *include, *arena, "-c", str(source), "-o", objects[-1]], "build of DAQP")
+    return include, objects
 
 
 def _run(cmd: list[str], what: str) -> None:
