@@ -311,6 +311,11 @@ def _work_config(bench: Bench, overrides: list[str], force: bool):
     return config
 
 
+def _sets(overrides: list[str], key: str) -> bool:
+    """Whether one of the ``--set KEY=VALUE`` assignments is ``key``'s."""
+    return any(item.split("=", 1)[0].strip() == key for item in overrides or ())
+
+
 def _codegen(args) -> int:
     from hystmpc.experiments.realtime import codegen
     bench = _bench(args.bench)
@@ -321,6 +326,9 @@ def _codegen(args) -> int:
     if args.target not in (None, *CODEGEN_TARGETS):
         raise UsageError(f"--target {args.target!r} is unknown; allowed: {', '.join(CODEGEN_TARGETS)}")
     config = _work_config(bench, args.overrides, args.force)
+    if args.target is not None and not _sets(args.overrides, "solver.rti.sensitivity_block"):
+        from hystmpc.experiments.firmware import firmware_config
+        config = firmware_config(bench, config)  # RAM before speed
     if args.duration is not None:
         _samples(args.duration, bench.sample_period, "--duration", args.force)
     out = Path(args.out) if args.out else Path("codegen") / bench.name
@@ -342,6 +350,9 @@ def _codegen(args) -> int:
                   f"documents the interface; example loop {ctrl['name']}_main")
         if args.target in ctrl:
             m7 = ctrl[args.target]
+            if ctrl["sensitivity_block"]:
+                print(f"sensitivities padded in blocks of {ctrl['sensitivity_block']} for less RAM, the same "
+                      "numbers (solver.rti.sensitivity_block; set 0 for the fastest step)")
             print(f"{args.target} build ({m7['qp']} QP): text {m7['text']:,} B, data {m7['data']:,} B, "
                   f"bss {m7['bss']:,} B: {m7['elf']}")
         if args.verify and "verify" in ctrl:

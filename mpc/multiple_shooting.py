@@ -116,9 +116,9 @@ class MultipleShootingProblem(TrackingProblem):
 
         Built from one model step and its Jacobians, called once per predicted sample, with
         the output sensitivities to the inputs propagated forward (``S_{k+1} = A_k S_k``,
-        plus ``B_k`` as the newest column). Differentiating the unrolled rollout instead gives
-        the same numbers but one expression per entry of J: for pam at N = 20, 3.2 MB of C
-        that took 45–100 s to compile.
+        plus ``B_k`` as the newest column; ``solver.rti.sensitivity_block`` pads them).
+        Differentiating the unrolled rollout instead gives the same numbers but one expression
+        per entry of J: for pam at N = 20, 3.2 MB of C that took 45–100 s to compile.
         """
         m, s = self.model, self.settings
         N, nx, nd = s.horizon, m.nx, m.nd
@@ -138,12 +138,20 @@ class MultipleShootingProblem(TrackingProblem):
         du = D @ U - ca.vertcat(u_prev, ca.DM.zeros(N - 1))
         H_const = s.r_rate * (D.T @ D) + (s.r_input + REGULARISATION) * ca.DM.eye(N)
         grad = s.r_rate * (D.T @ du) + s.r_input * (U - u_ff)
+        block = self.solvers.rti.sensitivity_block
         x, S, errors, rows = x0, None, [], []
         for k in range(N):
             x, y, A, B, Cy = step_linear(x, U[k], d)
-            S = B if S is None else ca.horzcat(A @ S, B)
+            if block:  # one size for several k: CasADi reuses a work slot only for a value of the same size
+                width = min(N, -(-(k + 1) // block) * block)
+                if S is not None and S.size2() < width:
+                    S = ca.horzcat(S, ca.DM.zeros(nx, width - S.size2()))
+                newest = B @ ca.DM(ca.Sparsity.triplet(1, width, [0], [k]), 1.0)  # B in column k
+                S = ca.densify(newest if S is None else A @ S + newest)
+            else:
+                S = B if S is None else ca.horzcat(A @ S, B)
             errors.append(y - ref[k])
-            rows.append(ca.horzcat(Cy @ S, ca.MX(1, N - k - 1)))
+            rows.append(ca.horzcat(Cy @ S, ca.MX(1, N - S.size2())))
         e, Jy = ca.vertcat(*errors), ca.vertcat(*rows)
         H = s.q_output * (Jy.T @ Jy) + H_const
         grad = grad + s.q_output * (Jy.T @ e)

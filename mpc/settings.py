@@ -147,12 +147,21 @@ class RtiSettings:
     states and inputs (``condensed=false``) solves with qrqp and refuses ``ipm``."""
     qp_iterations: int = 30
     """Interior-point iterations of the ``ipm`` QP (fixed: real time); refused with ``daqp``."""
+    sensitivity_block: int = 0
+    """Condensed multiple-shooting step: 0 keeps the sensitivity of each predicted state to the
+    inputs at its exact width (fastest); ``b > 0`` pads it with explicit zeros to a multiple of
+    ``b`` columns, so generated code reuses its work memory from sample to sample (less RAM,
+    more arithmetic on zeros, the same numbers to the last bit). ``codegen --target`` picks it
+    for a microcontroller."""
 
     def check_step(self, condensed: bool) -> None:
         """Refuse the settings this RTI step would not use (``ValueError``)."""
         if self.qp != "ipm" and self.qp_iterations != RtiSettings.qp_iterations:
             raise ValueError(f"solver.rti.qp_iterations={self.qp_iterations} applies to solver.rti.qp=ipm only "
                              f"(qp is {self.qp})")
+        if self.sensitivity_block and not condensed:
+            raise ValueError(f"solver.rti.sensitivity_block={self.sensitivity_block} applies to the condensed step "
+                             "only (solver.rti.condensed=true)")
         if self.qp == "ipm" and not condensed:
             raise ValueError("solver.rti.qp=ipm needs solver.rti.condensed=true: the step over states and inputs "
                              "has unbounded states and solves with qrqp (set solver.rti.qp=daqp with it)")
@@ -162,6 +171,8 @@ class RtiSettings:
             raise ValueError(f"qp must be one of daqp, ipm, got {self.qp!r}")
         if self.iterations < 1:
             raise ValueError(f"iterations must be >= 1, got {self.iterations}")
+        if self.sensitivity_block < 0:
+            raise ValueError(f"sensitivity_block must be >= 0 (0: exact widths), got {self.sensitivity_block}")
         if self.qp_iterations < 10:
             raise ValueError(f"qp_iterations must be >= 10, got {self.qp_iterations}")
 

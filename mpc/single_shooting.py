@@ -63,6 +63,9 @@ class SingleShootingProblem(TrackingProblem):
         if not solvers.rti.condensed:
             raise ValueError("solver.rti.condensed=false needs a multiple-shooting problem; a single-shooting "
                              "problem has the inputs as its only unknowns")
+        if solvers.rti.sensitivity_block:
+            raise ValueError(f"solver.rti.sensitivity_block={solvers.rti.sensitivity_block} needs a multiple-shooting "
+                             "problem; a single-shooting problem differentiates its prediction as a whole")
         super().__init__(settings, bounds, solvers, predict.size1_in(0))
         self.predict = predict
         self._predict_jacobian, self._compact_predict = predict_jacobian, compact_predict

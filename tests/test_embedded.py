@@ -128,3 +128,29 @@ def test_an_exact_memory_with_an_ekf_on_the_dynamics_repeats_the_python_controll
     generated = bench.run(scenario, "nmpc", duration=0.5, prepared=replace(prepared, controller=functions))
     assert np.max(np.abs(reference.input - generated.input)) <= 1e-9
     assert np.ptp(generated.input) > 0.1
+
+
+def test_padded_sensitivities_give_the_same_inputs_to_the_last_bit_in_less_memory():
+    """solver.rti.sensitivity_block pads the condensed step's sensitivities with exact zeros:
+    the closed loop is the same bit for bit, and the step's work vector shrinks (RAM in C)."""
+    bench = get_bench("pam")
+    runs, work = [], []
+    for block in (0, 5):
+        config = bench.configure(["nmpc.solver=rti", f"solver.rti.sensitivity_block={block}"])
+        prepared = bench.prepare("square-20", "nmpc", config)
+        work.append(prepared.controller.problem.rti.sz_w())
+        runs.append(bench.run("square-20", "nmpc", duration=3.0, prepared=prepared))
+    assert np.array_equal(runs[0].input, runs[1].input)
+    assert np.ptp(runs[0].input) > 1.0  # a step of the square was tracked
+    assert work[1] < 0.9 * work[0], work
+
+
+@pytest.mark.parametrize(("bench_name", "assignments", "match"), [
+    ("pam", ("solver.rti.sensitivity_block=-1",), "sensitivity_block must be >= 0"),
+    ("pam", ("solver.rti.sensitivity_block=5", "solver.rti.condensed=false"), "applies to the condensed step only"),
+    ("dea", ("solver.rti.sensitivity_block=5",), "needs a multiple-shooting problem"),
+])
+def test_sensitivity_block_is_refused_where_it_would_not_apply(bench_name, assignments, match):
+    bench = get_bench(bench_name)
+    with pytest.raises(ValueError, match=match):
+        bench.build_controller("nmpc", bench.configure(["nmpc.solver=rti", *assignments]))
