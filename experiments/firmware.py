@@ -263,7 +263,7 @@ def controller_config(bench: Bench, config: dict) -> dict:
 
 MICROCONTROLLER_SENSITIVITY_BLOCK = 5
 """``solver.rti.sensitivity_block`` of a microcontroller build where the user set none: pam's
-controller at N = 20 needs 61,968 B of RAM instead of 68,440 B (Cortex-M7), with the same
+controller at N = 20 needs 61,936 B of RAM instead of 68,408 B (Cortex-M7), with the same
 inputs to the last bit; its step takes about 20 % longer on x86."""
 
 

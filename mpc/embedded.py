@@ -307,20 +307,24 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
 
     refs = window[1:] if s.preview else ca.repmat(window[0], N, 1)
     u_min, u_max, rate = float(bounds.lower), float(bounds.upper), float(bounds.rate)
-    u_inv = None
-    if controller.inverse is not None:
-        raw = _symbolic(lambda r: controller.inverse(est, r), "the inverse model", refs, N)
-        u_inv = _clip(ca.if_else(ca.fabs(raw) < ca.inf, raw, u_last), u_min, u_max)
+    inverse_plan = None if controller.inverse is None else _inverse_plan(controller, est, refs, u_last, N)
     jump = ca.MX(0)
     if np.isfinite(controller.jump_threshold):
         jump = ca.logic_and(part("has_ref_end") > 0.5, ca.fabs(refs[-1] - part("ref_end")) > controller.jump_threshold)
     has_plan = ca.logic_and(part("has_plan") > 0.5, ca.logic_not(lost))  # a restarted estimate drops the plan
     plan = part("plan")
     shifted = ca.vertcat(plan[1:], plan[-1])
+    # the inverse costs dea's controller a quarter of its step: computed only on the samples that use it
+    needs_inverse = ca.MX(0)
+    if s.warm_start == "inverse":
+        needs_inverse = ca.logic_or(ca.logic_not(has_plan), jump)
+    if inverse_plan is not None and s.r_input > 0:
+        needs_inverse = ca.MX(1)
+    u_inv = None if inverse_plan is None else inverse_plan(needs_inverse)
     if s.warm_start == "cold":
         u_guess = ca.DM.zeros(N)
     elif s.warm_start == "inverse":
-        u_guess = ca.if_else(ca.logic_or(ca.logic_not(has_plan), jump), u_inv, shifted)
+        u_guess = ca.if_else(needs_inverse, u_inv, shifted)
     else:
         u_guess = ca.if_else(has_plan, shifted, ca.repmat(u_last, N, 1))
     u_ff = u_inv if s.r_input > 0 else ca.DM.zeros(N)
@@ -335,9 +339,14 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
         w = ca.if_else(finite, w_next, w)  # a non-finite step is a failure; the next QP gets finite data
     success = ca.logic_and(ca.logic_and(ca.logic_not(lost), ca.logic_not(broken)), worst <= QP_TOLERANCE)
 
-    fallback = u_inv[0] if u_inv is not None else u_last
-    u = ca.if_else(success, w[0], ca.if_else(has_plan, plan[min(1, N - 1)], fallback))
-    u = ca.if_else(ca.fabs(u) < ca.inf, u, fallback)  # never a NaN to the actuator
+    planned = ca.if_else(success, w[0], plan[min(1, N - 1)])
+    # the fallback when neither the step nor the last plan gives a finite input: never a NaN to the actuator
+    falls_back = ca.logic_not(ca.logic_and(ca.logic_or(success, has_plan), ca.fabs(planned) < ca.inf))
+    fallback = u_last
+    if inverse_plan is not None:  # the inverse's first input, computed again only if not at hand
+        fallback = ca.if_else(needs_inverse, u_inv[0], inverse_plan(ca.logic_and(falls_back,
+                                                                               ca.logic_not(needs_inverse)))[0])
+    u = ca.if_else(falls_back, fallback, planned)
     if np.isfinite(rate):
         u = _clip(u, u_last - rate, u_last + rate)
     u = _clip(u, u_min, u_max)
@@ -349,6 +358,22 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     feedback = ca.Function(f"{name}_feedback", [mem, z, window], [mem_next, u, status, predicted],
                            ["mem", "z", "ref_preview"], ["mem_next", "u", "status", "predicted"])
     return feedback, prepare, layout
+
+
+def _inverse_plan(controller, est: Estimate, refs, u_last, N: int):
+    """``plan(needed)``: the inverse model's inputs for ``refs`` from the estimate ``est``
+    (bounded; a non-finite one replaced by ``u_last``) where ``needed`` is true, zeros where it
+    is false, through a switch, so that generated code computes the inverse only when needed."""
+    fields = {k: v for k, v in vars(est).items() if v is not None}
+    symbols = {k: ca.MX.sym(k, ca.MX(v).sparsity()) for k, v in fields.items()}
+    refs_s, u_last_s = ca.MX.sym("refs", N), ca.MX.sym("u_last")
+    raw = _symbolic(lambda r: controller.inverse(Estimate(**symbols), r), "the inverse model", refs_s, N)
+    bounds = controller.bounds
+    plan = _clip(ca.if_else(ca.fabs(raw) < ca.inf, raw, u_last_s), float(bounds.lower), float(bounds.upper))
+    inputs = [*symbols.values(), refs_s, u_last_s]
+    switch = ca.Function.if_else("inverse_plan_if_needed", ca.Function("inverse_plan", inputs, [plan]),
+                                 ca.Function("no_inverse_plan", inputs, [ca.DM.zeros(N)]))
+    return lambda needed: switch(needed, *fields.values(), refs, u_last)
 
 
 def _symbolic(fun, what: str, arg, size: int):

@@ -163,7 +163,7 @@ def _defaults() -> dict:
             # 0.03 % per iteration) stops as converged instead of failing at max_iter (docs/dea.md)
             # rti (and the generated controller): 3 Gauss-Newton steps per sample (1 step left
             # single-sine at 0.0156 mm, 2-5 steps at 0.0052-0.0060) and the generated interior-point
-            # QP: with DAQP's workspace the C controller needs 67.7 kB of RAM, with it 62.2 kB (docs/dea.md)
+            # QP: with DAQP's workspace the C controller needs 66.6 kB of RAM, with it 61.4 kB (docs/dea.md)
             "solver": replace(SolverSettings().uniform(max_iter=60, tol=1e-3, ftol=1e-3),
                               rti=RtiSettings(iterations=3, qp="ipm"))}
 
