@@ -328,7 +328,10 @@ def _codegen(args) -> int:
     config = _work_config(bench, args.overrides, args.force)
     if args.target is not None and not _sets(args.overrides, "solver.rti.sensitivity_block"):
         from hystmpc.experiments.firmware import firmware_config
-        config = firmware_config(bench, config)  # RAM before speed
+        try:
+            config = firmware_config(bench, config)  # RAM before speed
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
     if args.duration is not None:
         _samples(args.duration, bench.sample_period, "--duration", args.force)
     out = Path(args.out) if args.out else Path("codegen") / bench.name

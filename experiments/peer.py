@@ -228,8 +228,11 @@ def acados_rti_timing(acados_package, bench_name: str = "pam", qp_solvers=ACADOS
     input, the stage cost ``q (y(f(x_k, u_k)) − r_k)² + r_rate Δu_k² + r_input (u_k − u_ff,k)²``
     (Gauss–Newton), the input bounds, the rate bound as a linear constraint, the same
     regularisation (``levenberg_marquardt``), initialised with hystmpc's guess and its rollout.
-    Each QP solver is timed with acados' own ``time_tot`` over ``repeats`` passes, alternated
-    with ``rounds`` runs of hystmpc's standalone C step (``rti_main``) on the same problems.
+    Each QP solver is built once and timed with acados' own ``time_tot`` over ``repeats``
+    passes, each timing right after one of hystmpc's standalone C step (``rti_main``,
+    ``repeats`` passes) on the same problems; ``rounds`` rounds over all the QP solvers.
+    Needs a bench whose NMPC is a condensed multiple-shooting problem with a rate bound (pam,
+    compliant, reluctance).
 
     Parameters
     ----------
@@ -253,10 +256,14 @@ def acados_rti_timing(acados_package, bench_name: str = "pam", qp_solvers=ACADOS
     if not (package / "acados_template" / "acados_layout.json").is_file() or not (package / "install").is_dir():
         raise ValueError(f"{package} is not the acados folder of the comma-deps-acados wheel "
                          "(it needs acados_template/ and install/)")
+    from hystmpc.mpc.multiple_shooting import MultipleShootingProblem
     bench = get_bench(bench_name)
     config = bench.configure(["nmpc.solver=rti"])
     prepared = bench.prepare(bench.default_scenario, "nmpc", config)
     problem = prepared.controller.problem
+    if not (isinstance(problem, MultipleShootingProblem) and problem.condensed and np.isfinite(problem.du_max)):
+        raise ValueError(f"bench {bench_name!r}: the acados twin needs a condensed multiple-shooting NMPC with a "
+                         "rate bound (pam, compliant, reluctance)")
     problem.rti = RecordingStep(problem.rti)
     bench.run(bench.default_scenario, "nmpc", prepared=prepared)
     calls = np.asarray(problem.rti.calls)
@@ -268,16 +275,20 @@ def acados_rti_timing(acados_package, bench_name: str = "pam", qp_solvers=ACADOS
         if not (importable / "acados").exists():
             (importable / "acados").symlink_to(package)  # acados alone: not the wheel's CasADi
         sys.path.insert(0, str(importable))
+        stack.callback(sys.path.remove, str(importable))
+        previous = os.environ.get("ACADOS_SOURCE_DIR")
         os.environ["ACADOS_SOURCE_DIR"] = str(source)
+        stack.callback(_restore_environment, "ACADOS_SOURCE_DIR", previous)
         for library in ("libblasfeo.so", "libhpipm.so", "libqpOASES_e.so.3.1", "libacados.so"):
             ctypes.CDLL(str(package / "install" / "lib" / library), mode=ctypes.RTLD_GLOBAL)  # for the solver's
         write_solver(bench, config, work / "hystmpc")
+        solvers = {qp: _acados_solver(problem, qp, work / qp.lower(), REGULARISATION, float(bench.sample_period))
+                   for qp in qp_solvers}
         rows = []
         for _ in range(rounds):
-            for qp in qp_solvers:
+            for qp, solver in solvers.items():
                 _, ours = run_program(work / "hystmpc", calls, problem.settings.horizon, repeats=repeats)
-                theirs = _acados_timing(problem, calls, qp, repeats, work / qp.lower(), REGULARISATION,
-                                        float(bench.sample_period))
+                theirs = {"qp": qp, **_acados_timing(problem, solver, calls, repeats)}
                 rows.append({**theirs, "hystmpc_median_us": ours["median_us"], "hystmpc_p95_us": ours["p95_us"],
                              "acados_over_hystmpc": theirs["median_us"] / ours["median_us"]})
     return {"bench": bench_name, "scenario": bench.default_scenario, "problems": len(calls), "repeats": repeats,
@@ -297,8 +308,16 @@ def _acados_source_layout(package, folder):
     return folder
 
 
-def _acados_timing(problem, calls, qp: str, repeats: int, folder, regularisation: float, dt: float) -> dict:
-    """One acados SQP_RTI solver for ``problem``, timed on ``calls``; its first inputs against hystmpc's."""
+def _restore_environment(key: str, value: str | None) -> None:
+    import os
+    if value is None:
+        os.environ.pop(key, None)
+    else:
+        os.environ[key] = value
+
+
+def _acados_solver(problem, qp: str, folder, regularisation: float, dt: float):
+    """acados' SQP_RTI solver of ``problem`` with the QP solver ``qp``, generated and built in ``folder``."""
     from acados.acados_template import AcadosModel, AcadosOcp, AcadosOcpSolver
     m, s = problem.model, problem.settings
     N, nx, nd = s.horizon, m.nx, m.nd
@@ -329,7 +348,13 @@ def _acados_timing(problem, calls, qp: str, repeats: int, folder, regularisation
     options.levenberg_marquardt, options.qp_solver = regularisation, qp
     ocp.code_export_directory = str(folder)
     with contextlib.redirect_stdout(None):
-        solver = AcadosOcpSolver(ocp, json_file=str(folder) + ".json", verbose=False)
+        return AcadosOcpSolver(ocp, json_file=str(folder) + ".json", verbose=False)
+
+
+def _acados_timing(problem, solver, calls, repeats: int) -> dict:
+    """``solver`` timed on ``calls`` (µs, its own ``time_tot``); its first inputs against hystmpc's step."""
+    m, N = problem.model, problem.settings.horizon
+    nx, nd = m.nx, m.nd
     times, differences = [], []
     for repeat in range(repeats):
         for call in calls:
@@ -351,7 +376,7 @@ def _acados_timing(problem, calls, qp: str, repeats: int, folder, regularisation
                 ours = float(np.asarray(problem.rti.fun(w0, p)[0]).ravel()[0])
                 differences.append(abs(float(solver.get(0, "u")[0]) - ours))
     differences = np.asarray(differences)
-    return {"qp": qp, "median_us": float(np.median(times)), "p95_us": float(np.percentile(times, 95)),
+    return {"median_us": float(np.median(times)), "p95_us": float(np.percentile(times, 95)),
             "first_input_difference_median": float(np.median(differences)),
             "first_input_difference_max": float(differences.max()),
             "share_within_1e-6": float(np.mean(differences <= 1e-6))}
@@ -361,6 +386,10 @@ if __name__ == "__main__":  # python -m hystmpc.experiments.peer [BENCH | acados
     import json
     import sys
     if sys.argv[1:2] == ["acados"]:
+        if len(sys.argv) != 3:
+            print("usage: python -m hystmpc.experiments.peer acados ACADOS_FOLDER (the unpacked wheel's acados/)",
+                  file=sys.stderr)
+            sys.exit(2)
         print(json.dumps(acados_rti_timing(sys.argv[2]), indent=1))
     else:
         print(json.dumps(benchmark(sys.argv[1] if len(sys.argv) > 1 else "pam"), indent=1))

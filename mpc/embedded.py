@@ -315,16 +315,15 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     plan = part("plan")
     shifted = ca.vertcat(plan[1:], plan[-1])
     # the inverse costs dea's controller a quarter of its step: computed only on the samples that use it
-    needs_inverse = ca.MX(0)
-    if s.warm_start == "inverse":
-        needs_inverse = ca.logic_or(ca.logic_not(has_plan), jump)
-    if inverse_plan is not None and s.r_input > 0:
-        needs_inverse = ca.MX(1)
-    u_inv = None if inverse_plan is None else inverse_plan(needs_inverse)
+    restart = ca.logic_or(ca.logic_not(has_plan), jump)  # the inverse warm start's samples
+    needs_inverse = ca.MX(1) if s.r_input > 0 else restart if s.warm_start == "inverse" else ca.MX(0)
+    u_inv = None
+    if inverse_plan is not None and (s.r_input > 0 or s.warm_start == "inverse"):
+        u_inv = inverse_plan(needs_inverse)
     if s.warm_start == "cold":
         u_guess = ca.DM.zeros(N)
     elif s.warm_start == "inverse":
-        u_guess = ca.if_else(needs_inverse, u_inv, shifted)
+        u_guess = ca.if_else(restart, u_inv, shifted)
     else:
         u_guess = ca.if_else(has_plan, shifted, ca.repmat(u_last, N, 1))
     u_ff = u_inv if s.r_input > 0 else ca.DM.zeros(N)
@@ -344,8 +343,8 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     falls_back = ca.logic_not(ca.logic_and(ca.logic_or(success, has_plan), ca.fabs(planned) < ca.inf))
     fallback = u_last
     if inverse_plan is not None:  # the inverse's first input, computed again only if not at hand
-        fallback = ca.if_else(needs_inverse, u_inv[0], inverse_plan(ca.logic_and(falls_back,
-                                                                               ca.logic_not(needs_inverse)))[0])
+        again = inverse_plan(falls_back if u_inv is None else ca.logic_and(falls_back, ca.logic_not(needs_inverse)))
+        fallback = again[0] if u_inv is None else ca.if_else(needs_inverse, u_inv[0], again[0])
     u = ca.if_else(falls_back, fallback, planned)
     if np.isfinite(rate):
         u = _clip(u, u_last - rate, u_last + rate)

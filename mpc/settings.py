@@ -150,9 +150,9 @@ class RtiSettings:
     sensitivity_block: int = 0
     """Condensed multiple-shooting step: 0 keeps the sensitivity of each predicted state to the
     inputs at its exact width (fastest); ``b > 0`` pads it with explicit zeros to a multiple of
-    ``b`` columns, so generated code reuses its work memory from sample to sample (less RAM,
-    more arithmetic on zeros, the same numbers to the last bit). ``codegen --target`` picks it
-    for a microcontroller."""
+    ``b`` columns (``b >= N``: dense), so generated code reuses its work memory from sample to
+    sample (less RAM, more arithmetic on zeros; the same numbers to the last bit while the
+    Jacobians are finite). ``codegen --target`` picks 5 for a microcontroller."""
 
     def check_step(self, condensed: bool) -> None:
         """Refuse the settings this RTI step would not use (``ValueError``)."""

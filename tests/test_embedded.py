@@ -32,6 +32,7 @@ def _python_and_generated(bench_name: str, scenario: str, duration: float, assig
 
 @pytest.mark.parametrize(("bench_name", "scenario", "duration", "moves", "assignments"), [
     ("pam", "square-20", 4.0, 1.0, ()),  # the EKF on the whole state, pam's inverse and rest state
+    ("pam", "square-20", 4.0, 1.0, ("nmpc.r_input=0.01",)),  # the inverse every sample (u_ff), shifted guesses
     ("compliant", "sine-2", 2.0, 0.05, ()),  # power-function turning points, Newton steps for θ(s)
     # the exact memory without sensors: the parametric hysteresis run exactly on the currents
     # sent (Lambert W as Halley steps), the inverse through the look-up table

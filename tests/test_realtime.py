@@ -113,6 +113,9 @@ def test_codegen_refuses_an_unknown_target_and_a_target_without_a_controller(tmp
     assert "--target 'avr' is unknown; allowed: cortex-m7" in capsys.readouterr().err
     assert main(["codegen", "dea", "--target", "cortex-m7", "--out", str(tmp_path / "b")]) == 2  # no window
     assert "--target cortex-m7 builds the whole controller" in capsys.readouterr().err
+    assert main(["codegen", "pam", "--target", "cortex-m7", "--out", str(tmp_path / "c"),
+                 "--set", "solver.rti.qp_iterations=20"]) == 2  # a setting the step would not use
+    assert "solver.rti.qp_iterations=20 applies to solver.rti.qp=ipm only" in capsys.readouterr().err
 
 
 @pytest.mark.slow
