@@ -91,8 +91,14 @@ class ReluctanceModel:
 
     def smooth_force_of_x(self, gap: float, kink_eps: float = 1e-4):
         """Lut⁻¹(X, g) as the polyline of :meth:`force_table` with its kinks rounded over
-        ``kink_eps`` (for CasADi)."""
+        ``kink_eps`` (for CasADi); ``kink_eps = 0``: the polyline itself, a binary-search
+        look-up (CasADi's linear interpolant, extended linearly beyond the table)."""
+        if not (np.isfinite(kink_eps) and kink_eps >= 0):
+            raise ValueError(f"kink_eps must be finite and >= 0 (0: the exact polyline), got {kink_eps}")
         xs, fs = self.force_table(gap)
+        if kink_eps == 0.0:
+            lookup = ca.interpolant("force_table", "linear", [xs], fs, {"lookup_mode": ["binary"]})
+            return lambda v: lookup(v) if symbolic(v) else float(lookup(v))
         slopes = np.diff(fs) / np.diff(xs)
 
         def force(v):
@@ -131,8 +137,9 @@ def fit_reluctance_model(loops: dict[float, tuple[np.ndarray, np.ndarray]], wind
 
 
 def prediction_model(model: ReluctanceModel, gap: float, sample_period: float, eps: float,
-                     direction_eps: float | None = None, kink_eps: float = 1e-4) -> PredictionModel:
-    """F = Lut⁻¹(H[i], g), eq. (12b), with the smooth H and the table as a smooth polyline.
+                     direction_eps: float | None = None, kink_eps: float = 0.0) -> PredictionModel:
+    """F = Lut⁻¹(H[i], g), eq. (12b), with the smooth H and the table as a polyline (its
+    kinks rounded over ``kink_eps``, see :meth:`ReluctanceModel.smooth_force_of_x`).
 
     Force is not measured in operation: no sensors, no disturbance; the state is H's. The
     static inverse is the table, Lut(F, g) (for warm starts: IH[Lut(F, g)], eq. (12a)).

@@ -2,6 +2,7 @@
 
 import json
 
+import casadi as ca
 import numpy as np
 import pytest
 
@@ -85,3 +86,30 @@ def test_calibration_on_the_e_core_ramps():
         poly = BENCH.run(scenario, "poly-inverse", config).metrics["max_abs_error"]
         assert hyst <= 0.3, (gap, hyst)
         assert poly >= 5 * hyst, (gap, poly, hyst)
+
+
+def test_the_nmpc_model_reads_the_table_exactly_or_rounded():
+    """kink_eps = 0: the table's polyline itself (value and slope, extended linearly beyond
+    it); kink_eps > 0: within kink_eps/2 × the largest slope change of it; negative refused."""
+    config = BENCH.configure()
+    _, gap, _ = rig(config)
+    model = identified_model(config)
+    xs, fs = model.force_table(gap)
+    slopes = np.diff(fs) / np.diff(xs)
+    inside = np.linspace(xs[0], xs[-1], 997)
+    beyond = np.array([xs[-1] + 0.3, xs[0] - 0.2])
+    exact = model.smooth_force_of_x(gap, kink_eps=0.0)
+    assert np.allclose([exact(v) for v in inside], np.interp(inside, xs, fs), rtol=1e-13, atol=1e-10)
+    assert exact(beyond[0]) == pytest.approx(fs[-1] + 0.3 * slopes[-1], rel=1e-12)
+    assert exact(beyond[1]) == pytest.approx(fs[0] - 0.2 * slopes[0], rel=1e-12)
+    v = ca.SX.sym("v")
+    slope = ca.Function("slope", [v], [ca.jacobian(exact(v), v)])
+    middles = 0.5 * (xs[1:] + xs[:-1])
+    assert np.allclose([float(slope(m)) for m in middles], slopes, rtol=1e-12)
+    rounded = model.smooth_force_of_x(gap, kink_eps=1e-4)
+    bound = 0.5e-4 * np.abs(np.diff(slopes)).sum()
+    assert np.max(np.abs([rounded(v) - exact(v) for v in inside])) <= bound
+    with pytest.raises(ValueError, match="kink_eps must be finite and >= 0"):
+        model.smooth_force_of_x(gap, kink_eps=-1e-4)
+    with pytest.raises(ValueError, match="kink_eps"):
+        apply_overrides(config, ["table.kink_eps=-1"])

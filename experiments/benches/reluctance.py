@@ -79,6 +79,20 @@ class IdentificationSettings:
             raise ValueError("duration must be > 0 and window >= 1")
 
 
+@dataclass(frozen=True)
+class ForceTableSettings:
+    """How the NMPC's model reads force off the identified table, F = Lut⁻¹(X, g) (eq. (12b))."""
+
+    kink_eps: float = 0.0
+    """Width (A, in H's output X) over which each kink of the table's polyline is rounded;
+    0: the polyline itself, found by binary search. Rounded, its ~100 kinks cost one
+    square root each, about half of the C controller's step (docs/reluctance.md)."""
+
+    def __post_init__(self):
+        if not (np.isfinite(self.kink_eps) and self.kink_eps >= 0):
+            raise ValueError(f"kink_eps must be finite and >= 0 (0: the exact polyline), got {self.kink_eps}")
+
+
 @functools.lru_cache(maxsize=8)
 def identify(plant: ReluctanceParams, settings: IdentificationSettings, force_max: float) -> ReluctanceModel:
     """Run the simulated identification experiment on ``plant`` and fit the model (cached)."""
@@ -210,7 +224,8 @@ def build(kind: str, config: dict):
                                 InputBounds(0.0, plant.current_limit, slew), config["lmpc"], process_noise=[0.0],
                                 measurement_noise=[], initial_state=lambda z: np.zeros(1), initial_covariance=[0.0])
     smoothing: Smoothing = config["smoothing"]
-    pm = prediction_model(model, gap, plant.sample_period, smoothing.eps, smoothing.direction)
+    pm = prediction_model(model, gap, plant.sample_period, smoothing.eps, smoothing.direction,
+                          kink_eps=config["table"].kink_eps)
     # feed-forward: the exact H, run on the currents sent, re-anchors the smooth prediction every sample
     return NmpcController(pm, InputBounds(0.0, plant.current_limit, slew), config["nmpc"], config["solver"],
                           jump_threshold=20.0)
@@ -233,12 +248,13 @@ def _scenarios() -> dict[str, Scenario]:
 def _defaults() -> dict:
     return {"rig": RigSettings(), "ecore": ReluctanceParams(), "ccore": C_CORE,
             "identification": IdentificationSettings(),
-            # rti-c, 3 steps: no failed solve (sqp failed 15-76 times per run) and every
-            # perturbed actuator's steps won; the price is reversals-1.75mm (docs/reluctance.md)
+            # rti-c: no failed solve (sqp failed 15-76 times per run) and every perturbed
+            # actuator's steps won. The exact table and 2 steps per sample (not the rounded
+            # table and 3) fit the 5 kHz period in C (docs/reluctance.md)
             "nmpc": NmpcSettings(horizon=16, q_output=1.0, r_rate=1.0, solver="rti-c"),
             "lmpc": LinearMpcSettings(horizon=16, q_output=1.0, r_rate=1e-6),
-            "smoothing": Smoothing(eps=1e-5),
-            "solver": SolverSettings(rti=RtiSettings(iterations=3)).uniform(max_iter=50)}
+            "smoothing": Smoothing(eps=1e-5), "table": ForceTableSettings(),
+            "solver": SolverSettings(rti=RtiSettings(iterations=2)).uniform(max_iter=50)}
 
 
 IDENTIFIED = ("rig", "ecore", "ccore", "identification")
@@ -261,7 +277,7 @@ BENCH = Bench(
         "inverse-lmpc": ControllerSpec("inverse-lmpc", "IH[Lut(F, g)] + linear MPC (OSQP) with the slew limit",
                                        functools.partial(build, "lmpc"), (*IDENTIFIED, "lmpc")),
         "nmpc": ControllerSpec("nmpc", "feed-forward NMPC: currents over a horizon, slew limit, F = Lut⁻¹(H[i])",
-                               functools.partial(build, "nmpc"), (*IDENTIFIED, "nmpc", "smoothing", "solver")),
+                               functools.partial(build, "nmpc"), (*IDENTIFIED, "nmpc", "smoothing", "table", "solver")),
     },
     defaults=_defaults,
     make_plant=lambda c: ReluctanceActuator(rig(c)[0], rig(c)[1]),
