@@ -92,13 +92,20 @@ class ReluctanceModel:
     def smooth_force_of_x(self, gap: float, kink_eps: float = 1e-4):
         """Lut⁻¹(X, g) as the polyline of :meth:`force_table` with its kinks rounded over
         ``kink_eps`` (for CasADi); ``kink_eps = 0``: the polyline itself, a binary-search
-        look-up (CasADi's linear interpolant, extended linearly beyond the table)."""
+        look-up (CasADi's linear interpolant, extended linearly beyond the table), what
+        :func:`prediction_model` uses by default; the rounded default suits interior-point
+        NLPs (:func:`offline_optimum`)."""
         if not (np.isfinite(kink_eps) and kink_eps >= 0):
             raise ValueError(f"kink_eps must be finite and >= 0 (0: the exact polyline), got {kink_eps}")
         xs, fs = self.force_table(gap)
         if kink_eps == 0.0:
             lookup = ca.interpolant("force_table", "linear", [xs], fs, {"lookup_mode": ["binary"]})
-            return lambda v: lookup(v) if symbolic(v) else float(lookup(v))
+            def exact(v):
+                if symbolic(v):
+                    return lookup(v)
+                values = np.asarray(lookup(np.ravel(np.asarray(v, float))), float)
+                return float(values[0, 0]) if np.ndim(v) == 0 else values.reshape(np.shape(v))
+            return exact
         slopes = np.diff(fs) / np.diff(xs)
 
         def force(v):
@@ -183,7 +190,7 @@ def offline_optimum(model: ReluctanceModel, gap: float, reference: np.ndarray, c
 
     ref = np.asarray(reference, float)
     n = len(ref)
-    force = model.smooth_force_of_x(gap)
+    force = model.smooth_force_of_x(gap, kink_eps=1e-4)  # IPOPT wants the rounded, smooth table
     opti = ca.Opti()
     x = opti.variable(n)
     opti.subject_to(opti.bounded(-slew_per_sample, x - ca.vertcat(0.0, x[:-1]), slew_per_sample))

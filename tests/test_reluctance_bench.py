@@ -90,7 +90,8 @@ def test_calibration_on_the_e_core_ramps():
 
 def test_the_nmpc_model_reads_the_table_exactly_or_rounded():
     """kink_eps = 0: the table's polyline itself (value and slope, extended linearly beyond
-    it); kink_eps > 0: within kink_eps/2 × the largest slope change of it; negative refused."""
+    it, on floats, arrays and CasADi symbols); kink_eps > 0: within kink_eps/2 × the sum of
+    the slope changes of it; negative refused; the bench's NMPC uses the configured one."""
     config = BENCH.configure()
     _, gap, _ = rig(config)
     model = identified_model(config)
@@ -100,16 +101,24 @@ def test_the_nmpc_model_reads_the_table_exactly_or_rounded():
     beyond = np.array([xs[-1] + 0.3, xs[0] - 0.2])
     exact = model.smooth_force_of_x(gap, kink_eps=0.0)
     assert np.allclose([exact(v) for v in inside], np.interp(inside, xs, fs), rtol=1e-13, atol=1e-10)
+    assert np.array_equal(exact(inside.reshape(-1, 1)).ravel(), [exact(v) for v in inside])
     assert exact(beyond[0]) == pytest.approx(fs[-1] + 0.3 * slopes[-1], rel=1e-12)
     assert exact(beyond[1]) == pytest.approx(fs[0] - 0.2 * slopes[0], rel=1e-12)
     v = ca.SX.sym("v")
     slope = ca.Function("slope", [v], [ca.jacobian(exact(v), v)])
     middles = 0.5 * (xs[1:] + xs[:-1])
     assert np.allclose([float(slope(m)) for m in middles], slopes, rtol=1e-12)
+    assert np.all(np.isfinite([float(slope(x)) for x in xs]))  # a slope at the kinks too
     rounded = model.smooth_force_of_x(gap, kink_eps=1e-4)
     bound = 0.5e-4 * np.abs(np.diff(slopes)).sum()
     assert np.max(np.abs([rounded(v) - exact(v) for v in inside])) <= bound
     with pytest.raises(ValueError, match="kink_eps must be finite and >= 0"):
         model.smooth_force_of_x(gap, kink_eps=-1e-4)
-    with pytest.raises(ValueError, match="kink_eps"):
+    with pytest.raises(ValueError, match="kink_eps must be finite and >= 0"):
         apply_overrides(config, ["table.kink_eps=-1"])
+    kink = np.r_[np.zeros(4), xs[len(xs) // 2]]  # H's state with its output X on a kink
+    outputs = [float(BENCH.build_controller("nmpc", apply_overrides(config, [f"table.kink_eps={eps}"]))
+                     .model.output(kink, []))
+               for eps in (0.0, 1e-4)]
+    assert outputs[0] == pytest.approx(fs[len(xs) // 2], rel=1e-14)
+    assert abs(outputs[1] - outputs[0]) > 1e-9  # the rounded kink
