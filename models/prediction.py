@@ -191,17 +191,27 @@ class Dynamics:
     inverse of the dynamics; NumPy). Default inverse warm starts need it."""
     discrete: bool = False
     """``rhs`` gives the next state over one sample instead of the derivative."""
+    disturbances: int = 1
+    """Entries of ``d`` that ``rhs`` reads (``disturbance="dynamics"`` only): the estimator
+    tracks them all and the NMPC holds them over the horizon, so besides the offset-free
+    one they can be slow model errors, such as a gain, that the estimator learns."""
 
     def __post_init__(self):
         if self.state_names and self.rhs is None:
             raise ValueError("dynamics with states need a rhs")
         if self.shares_last_input and self.hysteresis_input is None:
             raise ValueError("shares_last_input needs a state-driven hysteresis (hysteresis_input)")
+        if isinstance(self.disturbances, bool) or not isinstance(self.disturbances, (int, np.integer)) \
+                or self.disturbances < 1:
+            raise ValueError(f"disturbances must be an integer >= 1, got {self.disturbances!r}")
 
 
 def _resolve_disturbance(disturbance: str, dynamics: Dynamics) -> str:
     if disturbance not in DISTURBANCES:
         raise ValueError(f"disturbance {disturbance!r} is unknown; allowed: {', '.join(DISTURBANCES)}")
+    if dynamics.disturbances != 1 and disturbance != "dynamics":
+        raise ValueError(f"{dynamics.disturbances} disturbances need disturbance='dynamics' (rhs reads them), "
+                         f"got {disturbance!r}")
     if disturbance != "auto":
         return disturbance
     input_driven = dynamics.hysteresis_input is None
@@ -245,7 +255,7 @@ class _Parts:
         self.dynamics, self.mode = dynamics, disturbance
         self.substep = sample_period / substeps
         self.substeps = substeps
-        self.nd = 0 if disturbance == "none" else 1
+        self.nd = 0 if disturbance == "none" else dynamics.disturbances if disturbance == "dynamics" else 1
 
     def h_in(self, h, d):
         """Hysteresis output as the dynamics and the output see it."""

@@ -145,17 +145,27 @@ def joint_acceleration(p: PamJointParams, theta_deg, omega_deg, dp, dp_hys, extr
     return torque / p.inertia / DEG
 
 
-def joint_rhs(p: PamJointParams, x, dp_cmd, dp_hys, extra_torque, xp=np) -> list:
+def joint_rhs(p: PamJointParams, x, dp_cmd, dp_hys, extra_torque, xp=np, wn_scale=None, zeta_scale=None) -> list:
     """Time derivative of ``x = [θ, ω, Δp, Δp']`` (deg, deg/s, bar, bar/s) for the plant and
-    the NMPC's model alike (see module docstring; the slew limit is the plant's own)."""
+    the NMPC's model alike (see module docstring; the slew limit is the plant's own).
+    ``wn_scale`` and ``zeta_scale`` scale the pressure loop's natural frequency and damping
+    ratio (an estimator's corrections; None: 1)."""
     theta, omega, dp, ddp = x[0], x[1], x[2], x[3]
     acc = joint_acceleration(p, theta, omega, dp, dp_hys, extra_torque, xp)
-    dd = p.pressure_wn**2 * (dp_cmd - dp - p.volume_coupling * omega) - 2 * p.pressure_zeta * p.pressure_wn * ddp
+    wn = p.pressure_wn if wn_scale is None else p.pressure_wn * wn_scale
+    zeta = p.pressure_zeta if zeta_scale is None else p.pressure_zeta * zeta_scale
+    dd = wn**2 * (dp_cmd - dp - p.volume_coupling * omega) - 2 * zeta * wn * ddp
     return [omega, acc, ddp, dd]
 
 
+ESTIMATES = ("gain", "pressure_frequency", "pressure_damping")
+"""Model errors :func:`prediction_model` can let the estimator learn, as relative errors
+``e`` (the model's value times ``1 + e``): ``gain`` of the muscles' torque per bar a0,
+``pressure_frequency`` and ``pressure_damping`` of the pressure loop's ωp and ζp."""
+
+
 def prediction_model(p: PamJointParams, eps: float, direction_eps: float | None = None,
-                     substeps: int = 2) -> PredictionModel:
+                     substeps: int = 2, estimates: tuple[str, ...] = ()) -> PredictionModel:
     """Smooth discrete-time model of the joint for the NMPC and its EKF.
 
     ``x = [θ, ω, Δp, Δp', F_1..F_M, q_1..q_D]``, ``d`` = an unknown torque (N m, where the
@@ -163,10 +173,28 @@ def prediction_model(p: PamJointParams, eps: float, direction_eps: float | None 
     relative to the sample's start (their last input *is* θ), so a monotone θ within a
     sample gives the exact update up to eps; the command passes the ``D``-sample delay line.
     Maxwell-slip has no direction detection: ``direction_eps`` must stay None.
+
+    ``estimates`` (names from :data:`ESTIMATES`, in that order) appends relative model
+    errors to ``d``, which the estimator then learns and the NMPC holds over the horizon.
     """
+    unknown = [name for name in estimates if name not in ESTIMATES]
+    if unknown or list(estimates) != [name for name in ESTIMATES if name in estimates]:
+        raise ValueError(f"estimates must be distinct names from {ESTIMATES} in that order, got {estimates}")
+    index = {name: 1 + i for i, name in enumerate(estimates)}
+
+    def rhs(x, u, h, d):
+        if not estimates:
+            return joint_rhs(p, x, u, h, d, xp=ca)
+        extra = d[0]
+        if "gain" in index:
+            extra = extra + d[index["gain"]] * torque_slope(p, x[0], ca) * (x[2] - h)
+        scale = {name: 1.0 + d[index[name]] if name in index else None
+                 for name in ("pressure_frequency", "pressure_damping")}
+        return joint_rhs(p, x, u, h, extra, xp=ca, wn_scale=scale["pressure_frequency"],
+                         zeta_scale=scale["pressure_damping"])
+
     dynamics = Dynamics(
-        state_names=("angle", "rate", "pressure", "pressure_rate"),
-        rhs=lambda x, u, h, d: joint_rhs(p, x, u, h, d, xp=ca),
+        state_names=("angle", "rate", "pressure", "pressure_rate"), disturbances=1 + len(estimates), rhs=rhs,
         output=lambda x, h: x[0], hysteresis_input=lambda x, u: x[0], shares_last_input=True,
         sensor_names=("y", "pressure"), measure=lambda x, h, y: [y, x[2]])
     return build_prediction_model(p.hysteresis, p.sample_period, dynamics=dynamics, eps=eps,
@@ -174,12 +202,14 @@ def prediction_model(p: PamJointParams, eps: float, direction_eps: float | None 
                                   delay_samples=p.delay_samples, substeps=substeps, name="pam")
 
 
-def inverse_inputs(p: PamJointParams, x, d, refs):
+def inverse_inputs(p: PamJointParams, x, d, refs, gain: bool = False):
     """Static inverse along the reference: Δp_cons(r) + Δp_hys(path) − d/a(r), eqs. (2)–(3),
     from the state ``x`` of :func:`prediction_model` (NumPy, or CasADi expressions for a
     generated controller).
 
     The command reaches the pressure ``D`` samples later, so input ``j`` aims at ``r_{j+D}``.
+    With ``gain`` (``d = [torque, g, ...]``, :func:`prediction_model`), the muscles'
+    torque is divided by ``1 + g``.
     """
     D, M = p.delay_samples, p.hysteresis.n_elements
     w = np.asarray(p.hysteresis.w)
@@ -194,7 +224,10 @@ def inverse_inputs(p: PamJointParams, x, d, refs):
     for j in range(n):
         r = refs[min(j + D, n - 1)]
         hys, dp_hys = p.hysteresis.step(hys, r)
-        need.append(constraint_pressure(p, r, xp) + dp_hys - d[0] / torque_slope(p, r, xp))
+        if gain:
+            need.append(dp_hys + (constraint_pressure(p, r, xp) - d[0] / torque_slope(p, r, xp)) / (1.0 + d[1]))
+        else:
+            need.append(constraint_pressure(p, r, xp) + dp_hys - d[0] / torque_slope(p, r, xp))
     return ca.vertcat(*need) if xp is ca else np.array(need, float)
 
 

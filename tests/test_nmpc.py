@@ -110,3 +110,21 @@ def test_failed_solve_falls_back_and_is_counted():
 def test_settings_validation(change, match):
     with pytest.raises(ValueError, match=match):
         NmpcSettings(**change)
+
+
+def test_extra_disturbances_reach_the_dynamics_only():
+    """``Dynamics.disturbances`` > 1 gives ``rhs`` a vector ``d`` (and the model ``nd``
+    entries); other places for ``d``, or a count below 1, are refused."""
+    from hystmpc.models.maxwell_slip import MaxwellSlip
+    from hystmpc.models.prediction import Dynamics, build_prediction_model
+    hysteresis = MaxwellSlip(k=(1.0,), w=(0.5,))
+    dynamics = Dynamics(state_names=("v",), rhs=lambda x, u, h, d: [-x[0] + h * (1 + d[1]) + d[0]], disturbances=2)
+    model = build_prediction_model(hysteresis, 0.01, dynamics=dynamics, disturbance="dynamics")
+    assert model.nd == 2
+    x = np.zeros(model.nx)
+    assert not np.allclose(np.asarray(model.step(x, 0.3, [0.0, 0.5])), np.asarray(model.step(x, 0.3, [0.0, 0.0])))
+    with pytest.raises(ValueError, match="2 disturbances need disturbance='dynamics'"):
+        build_prediction_model(hysteresis, 0.01, dynamics=dynamics, disturbance="output")
+    for bad in (0, 1.5, True):
+        with pytest.raises(ValueError, match="disturbances must be an integer >= 1"):
+            Dynamics(state_names=("v",), rhs=lambda x, u, h, d: [x[0]], disturbances=bad)

@@ -70,3 +70,33 @@ def test_plant_rejects_nan_input():
     plant.reset(0)
     with pytest.raises(ValueError, match="finite"):
         plant.step(float("nan"))
+
+
+def test_learned_model_errors_act_like_the_changed_parameters():
+    """``estimates`` append relative errors to d: gain e predicts like a0·(1 + e), and the
+    pressure-loop errors like ωp·(1 + e) and ζp·(1 + e); all zero is the plain model."""
+    from hystmpc.plants.pam_joint import ESTIMATES, inverse_inputs, prediction_model
+    plain = prediction_model(NOMINAL, 1e-3)
+    learned = prediction_model(NOMINAL, 1e-3, estimates=ESTIMATES)
+    assert (plain.nd, learned.nd) == (1, 4)
+    rng = np.random.default_rng(3)
+    x = np.concatenate(([12.0, 30.0, 1.5, 4.0], rng.uniform(-0.1, 0.1, plain.nx - 4)))
+    torque = 0.2
+    step = lambda model, d: np.asarray(model.step(x, 2.5, d)).ravel()  # noqa: E731
+    np.testing.assert_allclose(step(learned, [torque, 0, 0, 0]), step(plain, [torque]), rtol=0, atol=1e-12)
+    for k, changed in enumerate((dict(torque_per_bar=NOMINAL.torque_per_bar * 1.1),
+                                 dict(pressure_wn=NOMINAL.pressure_wn * 1.1),
+                                 dict(pressure_zeta=NOMINAL.pressure_zeta * 1.1))):
+        d = [torque, 0.0, 0.0, 0.0]
+        d[1 + k] = 0.1
+        expected = step(prediction_model(replace(NOMINAL, **changed), 1e-3), [torque])
+        assert not np.allclose(expected, step(plain, [torque]))
+        np.testing.assert_allclose(step(learned, d), expected, rtol=1e-12, atol=1e-12)
+    refs = np.linspace(0.0, 20.0, 8)
+    stronger = replace(NOMINAL, torque_per_bar=NOMINAL.torque_per_bar * 1.1)
+    np.testing.assert_allclose(inverse_inputs(NOMINAL, x, [torque, 0.1, 0.0, 0.0], refs, gain=True),
+                               inverse_inputs(stronger, x, [torque], refs), rtol=1e-12, atol=1e-12)
+    with pytest.raises(ValueError, match="estimates must be distinct names"):
+        prediction_model(NOMINAL, 1e-3, estimates=("pressure_damping", "gain"))
+    with pytest.raises(ValueError, match="estimates must be distinct names"):
+        prediction_model(NOMINAL, 1e-3, estimates=("stiffness",))

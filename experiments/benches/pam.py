@@ -20,6 +20,7 @@ from hystmpc.models.prediction import Smoothing
 from hystmpc.mpc import DisturbanceEKF, InputBounds, NmpcController, NmpcSettings, SolverSettings, StateObserver
 from hystmpc.mpc.linear_mpc import InverseLinearMpc, LinearMpcSettings
 from hystmpc.plants.pam_joint import (
+    ESTIMATES,
     PamJoint,
     PamJointParams,
     inverse_inputs,
@@ -50,10 +51,11 @@ creep drift over 20 s (vo2012 Section 1: creep makes the joint time-varying)."""
 
 
 @dataclass(frozen=True)
-class EstimatorNoise:
-    """Process noise of the NMPC's EKF where the model is least sure (``--set estimator.KEY=VALUE``).
+class DisturbanceNoise:
+    """Process noise of a Kalman filter on the joint where the model is least sure
+    (``--set lmpc_estimator.KEY=VALUE`` for ``inverse-lmpc``).
 
-    The EKF estimates the joint's states and an unknown torque ``d``. If it trusts the
+    The filter estimates the joint's states and an unknown torque ``d``. If it trusts the
     model's velocity dynamics and lets ``d`` move fast, an inertia or gain error in the
     model is read as a torque that changes with the acceleration, and the NMPC's answer to
     it closes a 3–4 Hz limit cycle (docs/pam.md). A large velocity noise makes the estimate
@@ -69,7 +71,39 @@ class EstimatorNoise:
         for name in ("velocity", "disturbance"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
-                raise ValueError(f"estimator.{name} must be finite and > 0, got {value}")
+                raise ValueError(f"{name} must be finite and > 0, got {value}")
+
+
+@dataclass(frozen=True)
+class EstimatorNoise(DisturbanceNoise):
+    """The NMPC's EKF (``--set estimator.KEY=VALUE``): :class:`DisturbanceNoise` plus three
+    model errors it learns (:data:`~hystmpc.plants.pam_joint.ESTIMATES`), each a random walk
+    of a relative error. Learning the torque gain removes the slow tracking error a wrong
+    a0 or stiffness leaves on a sine; learning the pressure loop's ωp and ζp removes the
+    ringing after steps on a joint whose valve loop is less damped than the model's
+    (docs/pam.md, "Robustness")."""
+
+    gain: float = 1e-6
+    """Variance per sample of the relative error of the muscles' torque per bar (0: not
+    estimated)."""
+    pressure_frequency: float = 1e-5
+    """Variance per sample of the relative error of the pressure loop's natural frequency
+    (0: not estimated)."""
+    pressure_damping: float = 1e-4
+    """Variance per sample of the relative error of the pressure loop's damping ratio (0: not
+    estimated)."""
+    initial: float = 0.04
+    """Variance of each estimated relative error before the first measurement (0.04: a
+    standard deviation of 20 %)."""
+
+    def __post_init__(self):
+        super().__post_init__()
+        if not (np.isfinite(self.initial) and self.initial > 0):
+            raise ValueError(f"initial must be finite and > 0, got {self.initial}")
+        for name in ESTIMATES:
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be finite and >= 0 (0: not estimated), got {value}")
 
 
 def build_pi(config: dict, compensate: bool) -> PidController:
@@ -86,17 +120,21 @@ def build_nmpc(config: dict) -> NmpcController:
     """The ``nmpc`` controller: EKF on [θ, Δp] sensors, NLP, inverse warm start."""
     model: PamJointParams = config["model"]
     smoothing: Smoothing = config["smoothing"]
-    pm = prediction_model(model, smoothing.eps, smoothing.direction)
-    D, M = model.delay_samples, model.hysteresis.n_elements
     noise: EstimatorNoise = config["estimator"]
-    q_noise = [1e-6, noise.velocity, 1e-5, 1e-2] + [1e-7] * M + [1e-12] * D + [noise.disturbance]
+    estimates = tuple(name for name in ESTIMATES if getattr(noise, name) > 0)
+    pm = prediction_model(model, smoothing.eps, smoothing.direction, estimates=estimates)
+    D, M = model.delay_samples, model.hysteresis.n_elements
+    q_noise = ([1e-6, noise.velocity, 1e-5, 1e-2] + [1e-7] * M + [1e-12] * D + [noise.disturbance]
+               + [getattr(noise, name) for name in estimates])
     quantum = 360.0 / model.encoder_counts
     ekf = DisturbanceEKF(pm, q_noise, [quantum**2 / 12 + 1e-6, model.pressure_noise_bar**2 + 1e-6])
-    p0 = [1e-3, 1.0, 1e-3, 1.0] + [1e-4] * M + [1e-12] * D + [0.1]
+    p0 = [1e-3, 1.0, 1e-3, 1.0] + [1e-4] * M + [1e-12] * D + [0.1] + [noise.initial] * len(estimates)
     observer = StateObserver(pm, ekf, lambda z: rest_state(model, z), p0)
     bounds = InputBounds(-model.dp_limit, model.dp_limit, model.pressure_slew * model.sample_period)
+    learns_gain = "gain" in estimates
     return NmpcController(pm, bounds, config["nmpc"], config["solver"], observer=observer,
-                          inverse=lambda est, refs: inverse_inputs(model, est.x, est.d, refs), jump_threshold=1.0)
+                          inverse=lambda est, refs: inverse_inputs(model, est.x, est.d, refs, learns_gain),
+                          jump_threshold=1.0)
 
 
 def build_inverse_lmpc(config: dict) -> InverseLinearMpc:
@@ -113,7 +151,7 @@ def build_inverse_lmpc(config: dict) -> InverseLinearMpc:
     offset.reset = hysteresis.reset
     compensation = AdditiveCompensation(offset, lambda m, c: [m.y, m.sensors["pressure"] - c])
     D = model.delay_samples
-    noise: EstimatorNoise = config["lmpc_estimator"]
+    noise: DisturbanceNoise = config["lmpc_estimator"]
     quantum = 360.0 / model.encoder_counts
     bounds = InputBounds(-model.dp_limit, model.dp_limit, model.pressure_slew * model.sample_period)
     return InverseLinearMpc(
@@ -143,7 +181,7 @@ def _defaults() -> dict:
     return {"plant": PLANT, "model": NOMINAL, "pi": PidGains(kp=0.08, ki=0.4), "nmpc": NmpcSettings(r_rate=10.0),
             "smoothing": Smoothing(eps=1e-3), "solver": SolverSettings(), "estimator": EstimatorNoise(),
             "lmpc": LinearMpcSettings(horizon=20, r_rate=30.0),
-            "lmpc_estimator": EstimatorNoise(velocity=1.0, disturbance=1e-2)}
+            "lmpc_estimator": DisturbanceNoise(velocity=1.0, disturbance=1e-2)}
 
 
 NMPC_GROUPS = ("model", "nmpc", "smoothing", "solver", "estimator")
