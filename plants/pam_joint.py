@@ -162,6 +162,17 @@ ESTIMATES = ("gain", "pressure_frequency", "pressure_damping")
 """Model errors :func:`prediction_model` can let the estimator learn, as relative errors
 ``e`` (the model's value times ``1 + e``): ``gain`` of the muscles' torque per bar a0,
 ``pressure_frequency`` and ``pressure_damping`` of the pressure loop's ωp and ζp."""
+LEARNED_ERROR_RANGE = (-0.75, 3.0)
+"""The models use a learned relative error clipped to this range (a quarter to four times
+the nominal value): at rest ωp and ζp are not observable and their estimates may wander, and
+a scale of 0 or below would divide by zero in the inverse or undamp the pressure loop. The
+estimates pass half and twice the nominal value for a few samples after some steps; a
+range that tight cost up to 20 % of RMSE on square-20 (docs/pam.md)."""
+
+
+def _bounded(error, xp=np):
+    low, high = LEARNED_ERROR_RANGE
+    return ca.fmin(ca.fmax(error, low), high) if xp is ca else np.clip(error, low, high)
 
 
 def prediction_model(p: PamJointParams, eps: float, direction_eps: float | None = None,
@@ -175,7 +186,8 @@ def prediction_model(p: PamJointParams, eps: float, direction_eps: float | None 
     Maxwell-slip has no direction detection: ``direction_eps`` must stay None.
 
     ``estimates`` (names from :data:`ESTIMATES`, in that order) appends relative model
-    errors to ``d``, which the estimator then learns and the NMPC holds over the horizon.
+    errors to ``d``, which the estimator then learns and the NMPC holds over the horizon;
+    the model uses each within :data:`LEARNED_ERROR_RANGE`.
     """
     unknown = [name for name in estimates if name not in ESTIMATES]
     if unknown or list(estimates) != [name for name in ESTIMATES if name in estimates]:
@@ -187,8 +199,8 @@ def prediction_model(p: PamJointParams, eps: float, direction_eps: float | None 
             return joint_rhs(p, x, u, h, d, xp=ca)
         extra = d[0]
         if "gain" in index:
-            extra = extra + d[index["gain"]] * torque_slope(p, x[0], ca) * (x[2] - h)
-        scale = {name: 1.0 + d[index[name]] if name in index else None
+            extra = extra + _bounded(d[index["gain"]], ca) * torque_slope(p, x[0], ca) * (x[2] - h)
+        scale = {name: 1.0 + _bounded(d[index[name]], ca) if name in index else None
                  for name in ("pressure_frequency", "pressure_damping")}
         return joint_rhs(p, x, u, h, extra, xp=ca, wn_scale=scale["pressure_frequency"],
                          zeta_scale=scale["pressure_damping"])
@@ -209,7 +221,7 @@ def inverse_inputs(p: PamJointParams, x, d, refs, gain: bool = False):
 
     The command reaches the pressure ``D`` samples later, so input ``j`` aims at ``r_{j+D}``.
     With ``gain`` (``d = [torque, g, ...]``, :func:`prediction_model`), the muscles'
-    torque is divided by ``1 + g``.
+    torque is divided by ``1 + g`` (g within :data:`LEARNED_ERROR_RANGE`).
     """
     D, M = p.delay_samples, p.hysteresis.n_elements
     w = np.asarray(p.hysteresis.w)
@@ -225,7 +237,8 @@ def inverse_inputs(p: PamJointParams, x, d, refs, gain: bool = False):
         r = refs[min(j + D, n - 1)]
         hys, dp_hys = p.hysteresis.step(hys, r)
         if gain:
-            need.append(dp_hys + (constraint_pressure(p, r, xp) - d[0] / torque_slope(p, r, xp)) / (1.0 + d[1]))
+            need.append(dp_hys + (constraint_pressure(p, r, xp) - d[0] / torque_slope(p, r, xp))
+                        / (1.0 + _bounded(d[1], xp)))
         else:
             need.append(constraint_pressure(p, r, xp) + dp_hys - d[0] / torque_slope(p, r, xp))
     return ca.vertcat(*need) if xp is ca else np.array(need, float)
@@ -233,11 +246,13 @@ def inverse_inputs(p: PamJointParams, x, d, refs, gain: bool = False):
 
 def rest_state(p: PamJointParams, z):
     """State of :func:`prediction_model` at rest from the sensor vector ``[θ, Δp]``: relaxed
-    hysteresis, an empty delay line (NumPy, or CasADi expressions)."""
+    hysteresis, and a delay line holding the measured pressure (at rest the command is the
+    pressure, so a joint started pressurised is not predicted to vent; NumPy, or CasADi
+    expressions)."""
     D, M = p.delay_samples, p.hysteresis.n_elements
     if symbolic(z):
-        return ca.vertcat(z[0], 0.0, z[1], 0.0, ca.DM.zeros(M + D))
-    return np.concatenate(([z[0], 0.0, z[1], 0.0], np.zeros(M + D)))
+        return ca.vertcat(z[0], 0.0, z[1], 0.0, ca.DM.zeros(M), *([z[1]] * D))
+    return np.concatenate(([z[0], 0.0, z[1], 0.0], np.zeros(M), np.full(D, z[1])))
 
 
 def linear_model(p: PamJointParams, substeps: int = 2) -> PredictionModel:

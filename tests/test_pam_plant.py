@@ -96,7 +96,38 @@ def test_learned_model_errors_act_like_the_changed_parameters():
     stronger = replace(NOMINAL, torque_per_bar=NOMINAL.torque_per_bar * 1.1)
     np.testing.assert_allclose(inverse_inputs(NOMINAL, x, [torque, 0.1, 0.0, 0.0], refs, gain=True),
                                inverse_inputs(stronger, x, [torque], refs), rtol=1e-12, atol=1e-12)
+    for subset in (("pressure_damping",), ("gain", "pressure_damping"), ("pressure_frequency",)):
+        d = [torque] + [0.1] * len(subset)
+        changed = {"gain": "torque_per_bar", "pressure_frequency": "pressure_wn", "pressure_damping": "pressure_zeta"}
+        truth = replace(NOMINAL, **{changed[n]: getattr(NOMINAL, changed[n]) * 1.1 for n in subset})
+        np.testing.assert_allclose(step(prediction_model(NOMINAL, 1e-3, estimates=subset), d),
+                                   step(prediction_model(truth, 1e-3), [torque]), rtol=1e-12, atol=1e-12)
+    # beyond LEARNED_ERROR_RANGE the model stops at a quarter (or four times) the nominal value
+    half = replace(NOMINAL, pressure_zeta=NOMINAL.pressure_zeta * 0.25, torque_per_bar=NOMINAL.torque_per_bar * 0.25)
+    np.testing.assert_allclose(step(learned, [torque, -3.0, 0.0, -3.0]), step(prediction_model(half, 1e-3), [torque]),
+                               rtol=1e-12, atol=1e-12)
+    assert np.all(np.isfinite(inverse_inputs(NOMINAL, x, [torque, -1.0, 0.0, 0.0], refs, gain=True)))
     with pytest.raises(ValueError, match="estimates must be distinct names"):
         prediction_model(NOMINAL, 1e-3, estimates=("pressure_damping", "gain"))
     with pytest.raises(ValueError, match="estimates must be distinct names"):
         prediction_model(NOMINAL, 1e-3, estimates=("stiffness",))
+
+
+def test_a_joint_started_pressurised_is_not_predicted_to_vent():
+    """The rest state's delay line holds the measured pressure: held at its holding pressure,
+    the model stays put and the EKF learns no error from the start."""
+    from hystmpc.experiments.benches.pam import BENCH
+    from hystmpc.plants.pam_joint import prediction_model, rest_state
+    theta = 10.0
+    hold = constraint_pressure(NOMINAL, theta)
+    model = prediction_model(NOMINAL, 1e-3)
+    x = rest_state(NOMINAL, [theta, hold])
+    for _ in range(20):
+        x = np.asarray(model.step(x, hold, [0.0])).ravel()
+    assert abs(x[0] - theta) < 1e-3 and abs(x[2] - hold) < 1e-9
+    observer = BENCH.build_controller("nmpc", BENCH.configure()).observer
+    observer.reset()
+    observer.update([theta, hold], None)
+    for _ in range(50):
+        observer.update([theta, hold], hold)
+    assert np.all(np.abs(observer.ekf.d[1:]) < 0.01), observer.ekf.d

@@ -104,6 +104,9 @@ class EstimatorNoise(DisturbanceNoise):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be finite and >= 0 (0: not estimated), got {value}")
+        if self.initial != EstimatorNoise.initial and not any(getattr(self, name) > 0 for name in ESTIMATES):
+            raise ValueError(f"initial={self.initial} applies to the learned model errors, but "
+                             f"{', '.join(ESTIMATES)} are all 0 (nothing is learned)")
 
 
 def build_pi(config: dict, compensate: bool) -> PidController:
