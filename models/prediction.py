@@ -383,7 +383,8 @@ def build_prediction_model(hysteresis: HysteresisModel, sample_period: float, *,
     if parts.nd and not ca.depends_on(ca.vertcat(x_next, y), d):
         raise ValueError(f"disturbance={mode!r}: the dynamics' rhs never reads d, so the tracking would not be "
                          "offset-free; let rhs use d or choose another disturbance")
-    unread = [i for i in range(parts.nd) if parts.nd > 1 and not ca.depends_on(ca.vertcat(x_next, y), d[i])]
+    read = ca.vertcat(x_next, y)
+    unread = [i for i in range(parts.nd) if not ca.depends_on(read, d[i])] if parts.nd > 1 else []
     if unread:
         raise ValueError(f"the dynamics' rhs never reads d[{unread[0]}] of its {parts.nd} disturbances: "
                          "an estimator could not learn it")

@@ -189,8 +189,7 @@ def prediction_model(p: PamJointParams, eps: float, direction_eps: float | None 
     errors to ``d``, which the estimator then learns and the NMPC holds over the horizon;
     the model uses each within :data:`LEARNED_ERROR_RANGE`.
     """
-    unknown = [name for name in estimates if name not in ESTIMATES]
-    if unknown or list(estimates) != [name for name in ESTIMATES if name in estimates]:
+    if list(estimates) != [name for name in ESTIMATES if name in estimates]:  # also catches unknown names
         raise ValueError(f"estimates must be distinct names from {ESTIMATES} in that order, got {estimates}")
     index = {name: 1 + i for i, name in enumerate(estimates)}
 

@@ -123,6 +123,9 @@ def test_extra_disturbances_reach_the_dynamics_only():
     assert model.nd == 2
     x = np.zeros(model.nx)
     assert not np.allclose(np.asarray(model.step(x, 0.3, [0.0, 0.5])), np.asarray(model.step(x, 0.3, [0.0, 0.0])))
+    lazy = Dynamics(state_names=("v",), rhs=lambda x, u, h, d: [-x[0] + h + d[0]], disturbances=2)
+    with pytest.raises(ValueError, match=r"never reads d\[1\] of its 2 disturbances"):
+        build_prediction_model(hysteresis, 0.01, dynamics=lazy, disturbance="dynamics")
     with pytest.raises(ValueError, match="2 disturbances need disturbance='dynamics'"):
         build_prediction_model(hysteresis, 0.01, dynamics=dynamics, disturbance="output")
     for bad in (0, 1.5, True):
