@@ -108,11 +108,12 @@ class MultipleShootingProblem(TrackingProblem):
         lower = np.concatenate((self.u_min * np.ones(N), -self.du_max * np.ones(n_rates)))
         upper = np.concatenate((self.u_max * np.ones(N), self.du_max * np.ones(n_rates)))
         linearise, cost = self._condensed_linearisation(p.numel(), n_rates)
-        return gauss_newton_step(linearise, cost, lower, upper, step_lengths=(0.5, 0.25, 0.125),
-                                 qp=self.solvers.rti.qp, qp_iterations=self.solvers.rti.qp_iterations)
+        rti = self.solvers.rti
+        return gauss_newton_step(linearise, cost, lower, upper, step_lengths=(0.5, 0.25, 0.125), qp=rti.qp,
+                                 qp_iterations=rti.qp_iterations, line_search=rti.line_search)
 
     def _condensed_linearisation(self, n_p: int, n_rates: int) -> tuple[ca.Function, ca.Function]:
-        """``linearise(U, p) -> (H, Jᵀr, A, g)`` and ``cost(U, p)`` of the condensed problem.
+        """``linearise(U, p) -> (H, Jᵀr, A, g, Σ r²)`` and ``cost(U, p)`` of the condensed problem.
 
         Built from one model step and its Jacobians, called once per predicted sample, with
         the output sensitivities to the inputs propagated forward (``S_{k+1} = A_k S_k``,
@@ -157,8 +158,9 @@ class MultipleShootingProblem(TrackingProblem):
         grad = grad + s.q_output * (Jy.T @ e)
         rates = du[:n_rates]
         A_rates = D[:n_rates, :]
-        linearise = ca.Function("rti_linearise", [U, p], [H, grad, ca.MX(A_rates), rates])
         x, cost = x0, s.r_rate * ca.sumsqr(du) + s.r_input * ca.sumsqr(U - u_ff)
+        linearise = ca.Function("rti_linearise", [U, p], [H, grad, ca.MX(A_rates), rates,
+                                                          cost + s.q_output * ca.sumsqr(e)])
         for k in range(N):
             x, y = step(x, U[k], d)
             cost += s.q_output * (y - ref[k]) ** 2

@@ -25,13 +25,16 @@ import numpy as np
 QP_SOLVERS = ("qrqp", "daqp", "ipm")
 """QP solvers of the Gauss–Newton step (:func:`gauss_newton_step`)."""
 
+LINE_SEARCHES = ("best", "descent")
+"""How :func:`gauss_newton_step` picks its step length (``solver.rti.line_search``)."""
+
 REGULARISATION = 1e-8
 """Added to the diagonal of JᵀJ: states enter the cost only through constraints."""
 
 
 def rti_function(residual: ca.Function, constraints: ca.Function, lbg, ubg, lbx, ubx,
                  name: str = "rti_step", step_lengths: tuple[float, ...] = (), qp: str = "qrqp",
-                 qp_iterations: int = 30) -> ca.Function:
+                 qp_iterations: int = 30, line_search: str = "best") -> ca.Function:
     """Build ``rti_step(w, p) -> (w_next, qp_error)`` from the NLP's residual and constraints.
 
     Parameters
@@ -47,6 +50,10 @@ def rti_function(residual: ca.Function, constraints: ca.Function, lbg, ubg, lbx,
         (a fixed backtracking, code-generatable). Only sound where every constraint is
         convex in ``w``, so that a shortened QP step stays feasible: single shooting with
         linear constraints, not multiple shooting.
+    line_search : {"best", "descent"}
+        With ``step_lengths``: ``best`` evaluates the cost at every step length; ``descent``
+        takes the full step without trying the others when it lowers the cost (the generated
+        code then computes the shorter steps' costs only when it does not).
     qp : {"qrqp", "daqp", "ipm"}
         ``qrqp``: CasADi's active-set solver (any bounds; wrong on some problems with
         inequality rows, see :mod:`hystmpc.mpc.qp`). ``daqp``: DAQP, a dual active-set
@@ -69,26 +76,33 @@ def rti_function(residual: ca.Function, constraints: ca.Function, lbg, ubg, lbx,
     g = constraints(w_sx, p_sx)
     J = ca.jacobian(r, w_sx)
     H = ca.mtimes(J.T, J) + REGULARISATION * ca.SX.eye(n)
-    linearise = ca.Function("rti_linearise", [w_sx, p_sx], [H, ca.mtimes(J.T, r), ca.jacobian(g, w_sx), g])
+    linearise = ca.Function("rti_linearise", [w_sx, p_sx],
+                            [H, ca.mtimes(J.T, r), ca.jacobian(g, w_sx), g, ca.sumsqr(r)])
     cost = ca.Function("rti_cost", [w_sx, p_sx], [ca.sumsqr(r)])
-    return gauss_newton_step(linearise, cost, lower, upper, name, step_lengths, qp, qp_iterations)
+    return gauss_newton_step(linearise, cost, lower, upper, name, step_lengths, qp, qp_iterations, line_search)
 
 
 def gauss_newton_step(linearise: ca.Function, cost: ca.Function, lower, upper, name: str = "rti_step",
-                      step_lengths: tuple[float, ...] = (), qp: str = "qrqp", qp_iterations: int = 30) -> ca.Function:
+                      step_lengths: tuple[float, ...] = (), qp: str = "qrqp", qp_iterations: int = 30,
+                      line_search: str = "best") -> ca.Function:
     """``rti_step(w, p) -> (w_next, qp_error)`` from a linearisation and a cost.
 
-    ``linearise(w, p) -> (H, Jᵀr, A, g)`` gives the Gauss–Newton Hessian (regularised), the
-    gradient, and the constraints ``g`` with their Jacobian ``A``; ``cost(w, p)`` is ``Σ r²``
-    (used by ``step_lengths`` only). ``lower`` and ``upper`` bound ``[w; g]``. The other
+    ``linearise(w, p) -> (H, Jᵀr, A, g[, Σ r²])`` gives the Gauss–Newton Hessian
+    (regularised), the gradient, the constraints ``g`` with their Jacobian ``A``, and the
+    cost at ``w`` (read by ``line_search='descent'`` only); ``cost(w, p)`` is ``Σ r²`` (used
+    by ``step_lengths`` only). ``lower`` and ``upper`` bound ``[w; g]``. The other
     parameters are :func:`rti_function`'s.
     """
+    if line_search not in LINE_SEARCHES:
+        raise ValueError(f"line_search {line_search!r} is unknown; allowed: {', '.join(LINE_SEARCHES)}")
+    if step_lengths and line_search == "descent" and linearise.n_out() < 5:
+        raise ValueError("line_search 'descent' needs the cost at w as linearise's fifth output")
     if qp not in QP_SOLVERS:
         raise ValueError(f"qp {qp!r} is unknown; allowed: {', '.join(QP_SOLVERS)}")
     n = linearise.size1_in(0)
     w = ca.MX.sym("w", n)
     p = ca.MX.sym("p", linearise.size1_in(1))
-    H_mx, grad, A_mx, g_mx = linearise(w, p)
+    H_mx, grad, A_mx, g_mx, *current_cost = linearise(w, p)
     C = ca.vertcat(ca.MX(ca.DM.eye(n)), A_mx)
     l_mx = ca.DM(lower) - ca.vertcat(w, g_mx)
     u_mx = ca.DM(upper) - ca.vertcat(w, g_mx)
@@ -116,14 +130,31 @@ def gauss_newton_step(linearise: ca.Function, cost: ca.Function, lower, upper, n
         qp_error = _constraint_violation(C @ step, l_mx, u_mx, lower, upper)
     w_next = w + step
     if step_lengths:
-        best_cost = cost(w_next, p)
-        for t in step_lengths:
-            trial = w + t * step
-            trial_cost = cost(trial, p)
-            better = trial_cost < best_cost
-            w_next = ca.if_else(better, trial, w_next)
-            best_cost = ca.if_else(better, trial_cost, best_cost)
+        full_cost = cost(w_next, p)
+        if line_search == "best":
+            w_next = _lowest_cost_step(cost, w, step, p, w_next, full_cost, step_lengths)
+        else:  # a switch, not an if_else: the shorter steps' costs are computed only when needed
+            ws, steps, ps, costs = ca.MX.sym("w", n), ca.MX.sym("step", n), ca.MX.sym("p", p.numel()), ca.MX.sym("c")
+            args = [ws, steps, ps, costs]
+            switch = ca.Function.if_else(
+                f"{name}_line_search", ca.Function("full_step", args, [ws + steps]),
+                ca.Function("backtracking", args,
+                            [_lowest_cost_step(cost, ws, steps, ps, ws + steps, costs, step_lengths)]))
+            w_next = switch(full_cost < current_cost[0], w, step, p, full_cost)
     return ca.Function(name, [w, p], [w_next, qp_error], ["w", "p"], ["w_next", "qp_error"])
+
+
+def _lowest_cost_step(cost: ca.Function, w, step, p, full, full_cost, step_lengths: tuple[float, ...]):
+    """Of ``full = w + step`` (whose cost is ``full_cost``) and ``w + t step`` for each step
+    length ``t``, the one with the lowest cost."""
+    w_next, best_cost = full, full_cost
+    for t in step_lengths:
+        trial = w + t * step
+        trial_cost = cost(trial, p)
+        better = trial_cost < best_cost
+        w_next = ca.if_else(better, trial, w_next)
+        best_cost = ca.if_else(better, trial_cost, best_cost)
+    return w_next
 
 
 def _stationarity(H, g, A, x, lam_x, lam_a):

@@ -154,6 +154,13 @@ class RtiSettings:
     sample (less RAM, more arithmetic on zeros; the same numbers to the last bit while the
     Jacobians are finite). ``codegen --target`` picks 5 for a microcontroller."""
 
+    line_search: str = "best"
+    """Step length of the condensed and single-shooting steps, among 1, 1/2, 1/4 and 1/8:
+    ``best``, the one with the lowest cost (four cost evaluations per step); ``descent``,
+    the full step whenever it lowers the cost, else the best of the four (one evaluation
+    on most steps: a faster step, and a different one where a shorter step would have
+    lowered the cost more)."""
+
     def check_step(self, condensed: bool) -> None:
         """Refuse the settings this RTI step would not use (``ValueError``)."""
         if self.qp != "ipm" and self.qp_iterations != RtiSettings.qp_iterations:
@@ -162,6 +169,9 @@ class RtiSettings:
         if self.sensitivity_block and not condensed:
             raise ValueError(f"solver.rti.sensitivity_block={self.sensitivity_block} applies to the condensed step "
                              "only (solver.rti.condensed=true)")
+        if self.line_search != RtiSettings.line_search and not condensed:
+            raise ValueError(f"solver.rti.line_search={self.line_search} applies to the condensed step only: the step "
+                             "over states and inputs takes the full step (solver.rti.condensed=true)")
         if self.qp == "ipm" and not condensed:
             raise ValueError("solver.rti.qp=ipm needs solver.rti.condensed=true: the step over states and inputs "
                              "has unbounded states and solves with qrqp (set solver.rti.qp=daqp with it)")
@@ -169,6 +179,8 @@ class RtiSettings:
     def __post_init__(self):
         if self.qp not in ("daqp", "ipm"):
             raise ValueError(f"qp must be one of daqp, ipm, got {self.qp!r}")
+        if self.line_search not in ("best", "descent"):
+            raise ValueError(f"line_search must be one of best, descent, got {self.line_search!r}")
         if self.iterations < 1:
             raise ValueError(f"iterations must be >= 1, got {self.iterations}")
         if self.sensitivity_block < 0:

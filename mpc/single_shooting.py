@@ -95,7 +95,7 @@ class SingleShootingProblem(TrackingProblem):
         self._uses_nlp_solver({"x": U, "f": cost, "g": du if rate_bounded else ca.SX(0, 1), "p": params})
 
     def _linearisation(self, n_params: int) -> tuple[ca.Function, ca.Function]:
-        """``linearise(U, params) -> (H, Jᵀr, A, g)`` and ``cost(U, params)`` from the model's
+        """``linearise(U, params) -> (H, Jᵀr, A, g, Σ r²)`` and ``cost(U, params)`` from the model's
         ``predict_jacobian`` and ``compact_predict`` (see :func:`hystmpc.mpc.rti.gauss_newton_step`)."""
         s, N, n = self.settings, self.horizon, self.n_condition
         U, params = ca.MX.sym("U", N), ca.MX.sym("params", n_params)
@@ -112,7 +112,7 @@ class SingleShootingProblem(TrackingProblem):
         J = ca.vertcat(np.sqrt(s.q_output) * dy, np.sqrt(s.r_rate) * D, np.sqrt(s.r_input) * ca.DM.eye(N))
         H = J.T @ J + REGULARISATION * ca.DM.eye(N)
         A, g = (ca.MX(ca.sparsify(D)), du) if self._rate_bounded else (ca.MX(0, N), ca.MX(0, 1))
-        linearise = ca.Function("rti_linearise", [U, params], [H, J.T @ r, A, g])
+        linearise = ca.Function("rti_linearise", [U, params], [H, J.T @ r, A, g, ca.sumsqr(r)])
         cost = ca.Function("rti_cost", [U, params], [ca.sumsqr(residual(self._compact_predict(p, U)))])
         return linearise, cost
 
@@ -142,12 +142,13 @@ class SingleShootingProblem(TrackingProblem):
             lower = np.concatenate((b["lbx"], b["lbg"]))
             upper = np.concatenate((b["ubx"], b["ubg"]))
             self.rti = gauss_newton_step(linearise, cost, lower, upper, step_lengths=(0.5, 0.25, 0.125), qp=rti.qp,
-                                         qp_iterations=rti.qp_iterations)
+                                         qp_iterations=rti.qp_iterations, line_search=rti.line_search)
         else:
             residual = ca.Function("residual", [U, params], [residual])
             constraints = ca.Function("constraints", [U, params], [du if self._rate_bounded else ca.SX(0, 1)])
             self.rti = rti_function(residual, constraints, b["lbg"], b["ubg"], b["lbx"], b["ubx"],
-                                    step_lengths=(0.5, 0.25, 0.125), qp=rti.qp, qp_iterations=rti.qp_iterations)
+                                    step_lengths=(0.5, 0.25, 0.125), qp=rti.qp, qp_iterations=rti.qp_iterations,
+                                    line_search=rti.line_search)
         if self.settings.solver == "rti-c":
             self.rti, self.compiled = compiled_or_in_process(self.rti)
 

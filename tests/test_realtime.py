@@ -143,6 +143,26 @@ def test_rti_step_lengths_take_the_best_of_the_shortened_steps():
     assert float(searched(0.1, 0)[0]) == pytest.approx(0.1 + 0.125 * 9.9)  # lowest cost of 10, 5.05, 2.575, 1.3375
 
 
+def test_descent_line_search_takes_a_full_step_that_lowers_the_cost():
+    """``line_search='descent'`` keeps a full step that lowers the cost, where ``best`` takes
+    a shorter one that lowers it more; a full step that raises the cost is cut back as by ``best``."""
+    import casadi as ca
+
+    from hystmpc.mpc.rti import rti_function
+    w, p = ca.SX.sym("w"), ca.SX.sym("p")
+    residual = ca.Function("r", [w, p], [w**3 - 1])
+    constraints = ca.Function("g", [w, p], [ca.SX(0, 1)])
+    steps = {mode: rti_function(residual, constraints, [], [], [-10.0], [10.0], step_lengths=(0.5, 0.25, 0.125),
+                                line_search=mode) for mode in ("best", "descent")}
+    gn_step = (1 - 0.7**3) / (3 * 0.7**2)  # from 0.7: cost 0.432 → 0.259 at the full step, 0.045 at half of it
+    assert float(steps["descent"](0.7, 0)[0]) == pytest.approx(0.7 + gn_step)
+    assert float(steps["best"](0.7, 0)[0]) == pytest.approx(0.7 + 0.5 * gn_step)
+    for mode in ("best", "descent"):  # from 0.1 the full step (to the bound, 10) raises the cost
+        assert float(steps[mode](0.1, 0)[0]) == pytest.approx(0.1 + 0.125 * 9.9)
+    with pytest.raises(ValueError, match="line_search 'newton' is unknown; allowed: best, descent"):
+        rti_function(residual, constraints, [], [], [-10.0], [10.0], step_lengths=(0.5,), line_search="newton")
+
+
 @pytest.mark.parametrize("condensed, qp", [(True, "daqp"), (True, "ipm"), (False, "daqp")])
 def test_repeated_rti_steps_reach_the_converged_solution_or_say_they_failed(condensed, qp):
     """Iterated, the condensed RTI step (inputs only, DAQP or the interior-point QP) solves the

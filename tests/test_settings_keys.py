@@ -40,6 +40,8 @@ def _changed(bench_name: str, key: str, value) -> str:
         return OTHER_SOLVER[bench_name]
     if field == "qp":
         return "daqp" if value == "ipm" else "ipm"
+    if field == "line_search":
+        return "best" if value == "descent" else "descent"
     if VALUES.get(field) is not None and VALUES[field] != str(value):  # else the bench's default: change it
         return VALUES[field]
     if isinstance(value, bool):
