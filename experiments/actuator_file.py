@@ -32,7 +32,7 @@ import numpy as np
 
 from hystmpc.experiments.baselines import PidController, PidGains, inverse_feedforward_pid
 from hystmpc.experiments.bench import Bench, ControllerSpec
-from hystmpc.experiments.config import apply_overrides
+from hystmpc.experiments.config import apply_overrides, get_value
 from hystmpc.experiments.runner import Scenario
 from hystmpc.models.document import dynamics_from, read_model_document
 from hystmpc.models.identification import FAMILIES
@@ -185,8 +185,9 @@ class ActuatorSpec:
         self.step_s = self._number(scen, "step_s", 0.5 / self.sine_hz, positive=True, key="scenarios.step_s")
         self.duration_s = self._number(scen, "duration_s", 4.5 / self.sine_hz, positive=True,
                                        key="scenarios.duration_s")
-        self.overrides = [f"{group}.{key}={value}" for group in GROUP_TABLES
-                          for key, value in _flatten(raw.get(group, {}))]
+        self._table_values = [(f"{group}.{key}", value) for group in GROUP_TABLES
+                              for key, value in _flatten(raw.get(group, {}))]
+        self.overrides = [f"{key}={value}" for key, value in self._table_values]
         self._tuned: dict = {}
         try:
             self._configured()
@@ -276,7 +277,20 @@ class ActuatorSpec:
                                        r_rate=1e-3 * (100 / span_u) ** 2, solver="rti-c"),
                   "smoothing": Smoothing(eps=5e-5 * span_u), "solver": SolverSettings(),
                   "pid": PidGains(), "inverse_ff_pid": FeedforwardPidGains()}
+        self._check_types(config)
         return apply_overrides(config, self.overrides)
+
+    def _check_types(self, config: dict) -> None:
+        """A table value of the wrong TOML type (``horizon = "20"``, ``preview = 1``) is refused,
+        not converted."""
+        for key, value in self._table_values:
+            try:
+                current = get_value(config, key)
+            except ValueError:
+                continue  # an unknown key: apply_overrides names it
+            expected = _kind(current)
+            if expected is not None and _kind(value) != expected:
+                raise ValueError(f"{key} = {value!r}: expected {expected} (the default is {current!r})")
 
     def _settling(self) -> float:
         d = self.dynamics
@@ -447,6 +461,17 @@ def cache_dir() -> Path:
     if os.environ.get("HYSTMPC_CACHE_DIR"):
         return Path(os.environ["HYSTMPC_CACHE_DIR"])
     return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "hystmpc"
+
+
+def _kind(value) -> str | None:
+    """What a TOML value must be to set a field holding ``value`` (None: not checked here)."""
+    if isinstance(value, bool):
+        return "true or false"
+    if isinstance(value, str):
+        return "text"
+    if isinstance(value, (int, float)):
+        return "a number"
+    return None
 
 
 def _flatten(table: dict, prefix: str = ""):

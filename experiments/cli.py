@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import datetime as dt
 import json
 import logging
@@ -61,6 +62,8 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``hystmpc``."""
     parser = _Parser(prog="hystmpc", description="NMPC for actuators with hysteresis: benches from four papers.")
+    from hystmpc.experiments.report import version
+    parser.add_argument("--version", action="version", version=f"hystmpc {version()}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     p_list = sub.add_parser("list", help="benches, scenarios, controllers, solver variants")
     p_list.add_argument("bench", nargs="?", help="only this bench (a name, plugin or actuator file)")
@@ -68,7 +71,7 @@ def build_parser() -> argparse.ArgumentParser:
     p_run = sub.add_parser("run", help="one closed-loop run")
     p_run.add_argument("bench", help=BENCH_HELP)
     p_run.add_argument("scenario", nargs="?", help="one of the bench's scenarios (optional with --reference)")
-    p_run.add_argument("--controller", required=True)
+    p_run.add_argument("--controller", required=True, help="one of the bench's controllers ('hystmpc list BENCH')")
     _add_run_options(p_run)
     p_cmp = sub.add_parser("compare", help="every controller on every scenario, table and figures")
     p_cmp.add_argument("bench", nargs="?", default=DEFAULT_BENCH, help=BENCH_HELP)
@@ -101,7 +104,8 @@ def build_parser() -> argparse.ArgumentParser:
     p_cg.add_argument("--duration", type=float, help="length of the verification run (s)")
     p_cg.add_argument("--target", help="also cross-compile the whole controller for a microcontroller and "
                       "report its size: cortex-m7 (needs arm-none-eabi-gcc)")
-    p_cg.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    p_cg.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                      help="parameter override, repeatable (e.g. solver.rti.iterations=2)")
     p_cg.add_argument("--json", dest="json_file", help=JSON_HELP.format("report"))
     p_cg.add_argument("--force", action="store_true", help=FORCE_HELP)
     p_cg.add_argument("--quiet", action="store_true", help="print nothing but errors")
@@ -114,7 +118,8 @@ def build_parser() -> argparse.ArgumentParser:
                       "non-empty one is refused unless --overwrite")
     p_sp.add_argument("--overwrite", action="store_true", help="write into an --out folder that already holds files")
     p_sp.add_argument("--force", action="store_true", help=FORCE_HELP)
-    p_sp.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    p_sp.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                      help="parameter override, repeatable (e.g. nmpc.horizon=30)")
     p_sp.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p_id = sub.add_parser("identify", help="fit a hysteresis model to measured data (or a bench's own identification)")
     p_id.add_argument("family", metavar="FAMILY",
@@ -137,6 +142,7 @@ def build_parser() -> argparse.ArgumentParser:
                       "(rig.core=C)")
     p_id.add_argument("--no-plots", action="store_true", help="skip the figure")
     p_id.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    parser.commands = tuple(sub.choices)
     return parser
 
 
@@ -183,14 +189,22 @@ def _identify_bench(args) -> int:
         raise UsageError(str(exc)) from None
     doc["version"] = version()
     doc["overrides"] = list(args.overrides)
-    out = Path(args.out or "identified.json")
+    out = Path("identified.json")
+    if args.out is not None:
+        from hystmpc.experiments.identify import model_path
+        try:
+            out = model_path(args.out, "identified.json")
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+    replaced = out.exists()
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(doc, indent=1) + "\n")
     if not args.quiet:
         truth = (f" (plant {doc['true_p1_A']:.5f})", f" (plant {doc['true_p2_per_A_m']:.5f})") if "true_p1_A" in doc \
             else ("", "")
         print(f"core {doc['core']}: p1 = {doc['p1_A']:.5f} A{truth[0]}, "
-              f"p2 = {doc['p2_per_A_m']:.5f} 1/(A m){truth[1]}; written to {out}")
+              f"p2 = {doc['p2_per_A_m']:.5f} 1/(A m){truth[1]}; written to {out}"
+              + (" (replaced the earlier one)" if replaced else ""))
     return 0
 
 
@@ -323,6 +337,9 @@ def _codegen(args) -> int:
         raise UsageError(f"--solver {args.solver!r} cannot be code-generated yet; "
                          f"allowed: {', '.join(CODEGEN_SOLVERS)}")
     _positive_duration(args.duration)
+    if args.duration is not None and not args.verify:
+        raise UsageError(f"--duration {args.duration:g} sets the length of the --verify run; add --verify, or drop "
+                         "--duration")
     if args.target not in (None, *CODEGEN_TARGETS):
         raise UsageError(f"--target {args.target!r} is unknown; allowed: {', '.join(CODEGEN_TARGETS)}")
     config = _work_config(bench, args.overrides, args.force)
@@ -466,13 +483,20 @@ def _config(bench: Bench, overrides: list[str]):
         raise UsageError(str(exc)) from None
 
 
-def _scenario(bench: Bench, name: str, reference: str | None):
+def _scenario(bench: Bench, name: str | None, reference: str | None):
+    """Scenario ``name``, or the ``reference`` file's trajectory (under the conditions of
+    scenario ``name``, if one is named)."""
     if reference is None:
         return bench.scenarios[name]
     try:
-        return load_reference(reference, bench)
+        loaded = load_reference(reference, bench)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+    if name is None:
+        return loaded
+    named = bench.scenarios[name]
+    return dataclasses.replace(loaded, description=f"{loaded.description}, conditions of {name}",
+                               conditions=named.conditions)
 
 
 def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[str]) -> int:
@@ -650,10 +674,28 @@ def _log_notices(show: bool) -> None:
     log.setLevel(logging.INFO if show else logging.WARNING)
 
 
+def _parse(argv: list[str]) -> argparse.Namespace:
+    """The command line, with scenario names also accepted after options
+    (``compare pam --no-plots sine-30``)."""
+    parser = build_parser()
+    if not argv:
+        raise UsageError(f"name a command: {', '.join(parser.commands)} ('hystmpc COMMAND --help' describes each)")
+    args, extra = parser.parse_known_args(argv)
+    names = [e for e in extra if not e.startswith("-")]
+    if extra and len(names) == len(extra) and args.command == "compare":
+        args.scenarios = [*args.scenarios, *names]
+    elif extra and len(names) == len(extra) == 1 and args.command == "run" and args.scenario is None:
+        args.scenario = names[0]
+    elif extra:
+        options = [e for e in extra if e.startswith("-")]
+        raise UsageError(f"unrecognized arguments: {' '.join(options or extra)}")
+    return args
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code."""
     try:
-        args = build_parser().parse_args(argv)
+        args = _parse(sys.argv[1:] if argv is None else argv)
         _log_notices(not getattr(args, "quiet", False))
         if args.command == "list":
             return _list(args)
@@ -675,6 +717,9 @@ def main(argv: list[str] | None = None) -> int:
             return _execute(args, bench, scenario, [args.controller])
         scenarios = args.scenarios or ([] if args.reference else list(bench.scenarios))
         _check_names("scenario", scenarios, bench.scenarios)
+        if args.controllers is not None and not [c for c in args.controllers.split(",") if c.strip()]:
+            raise UsageError("--controllers is empty; allowed: a comma-separated list of "
+                             f"{', '.join(bench.controllers)} (or leave the option out for all of them)")
         controllers = args.controllers.split(",") if args.controllers else list(bench.controllers)
         _check_names("controller", controllers, bench.controllers)
         return _execute(args, bench, scenarios, controllers)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import datetime as dt
 import json
+import os
 import tempfile
 from pathlib import Path
 
@@ -32,6 +33,9 @@ def identify_command(args) -> int:
     from hystmpc.experiments.report import version
     if args.dynamics not in KINDS:
         raise ValueError(f"--dynamics {args.dynamics!r}; allowed: {', '.join(KINDS)}")
+    if args.dynamics_data and args.dynamics == "none":
+        raise ValueError(f"--dynamics-data {args.dynamics_data} fits the dynamics, but --dynamics is none; "
+                         "allowed with it: --dynamics first-order or second-order")
     if not 0 <= args.max_delay <= 1000:
         raise ValueError(f"--max-delay must be in [0, 1000] samples, got {args.max_delay}")
     options = _options(args.family, args.overrides)
@@ -41,10 +45,7 @@ def identify_command(args) -> int:
     for what, record in (("--validate", validation), ("--dynamics-data", fast)):
         if record is not None and abs(record[2] - period) > 1e-6 * period:
             raise ValueError(f"{what} file is sampled every {record[2]:g} s, the data every {period:g} s")
-    out = Path(args.out) if args.out else Path("results") / "identify" / dt.datetime.now(dt.UTC).strftime(
-        "%Y%m%dT%H%M%SZ") / "model.json"
-    if out.exists() and out.is_dir():
-        raise ValueError(f"--out {out} is a folder; name the model document's file")
+    out = model_path(args.out)
     try:  # before the fit: a path that cannot be written fails now, not after minutes of work
         out.parent.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryFile(dir=out.parent):
@@ -61,6 +62,7 @@ def identify_command(args) -> int:
     doc = model_document(identified, {"u": args.input_units, "y": args.units}, val, version(),
                          source={"data": str(args.data), **({"dynamics_data": str(args.dynamics_data)}
                                                             if args.dynamics_data else {})})
+    replaced = out.exists()
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(doc, indent=1) + "\n")
     figure = None
@@ -69,8 +71,20 @@ def identify_command(args) -> int:
                                        out.with_suffix(".png"), args.units, args.input_units)
     if not args.quiet:
         print(summary(doc))
-        print(f"model: {out}" + (f"; figure: {figure}" if figure else ""))
+        print(f"model: {out}" + (" (replaced the earlier one)" if replaced else "")
+              + (f"; figure: {figure}" if figure else ""))
     return 0
+
+
+def model_path(out: str | None, default_name: str = "model.json") -> Path:
+    """``--out``'s model document file (``ValueError`` for a folder; default under
+    ``results/identify/<timestamp>/``)."""
+    if out is None:
+        return Path("results") / "identify" / dt.datetime.now(dt.UTC).strftime("%Y%m%dT%H%M%SZ") / default_name
+    path = Path(out)
+    if out.endswith(("/", os.sep)) or path.is_dir():
+        raise ValueError(f"--out {out!r} is a folder; name the model document's file (e.g. {path / default_name})")
+    return path
 
 
 def summary(doc: dict) -> str:
@@ -87,8 +101,9 @@ def summary(doc: dict) -> str:
     dyn = doc["dynamics"]
     lines.append("  dynamics: " + ", ".join(f"{k} = {v:.5g}" if isinstance(v, float) else f"{k} = {v}"
                                             for k, v in dyn.items()))
-    lines.append(f"fit RMSE {doc['fit']['rmse']:.4g} {units} on {doc['fit']['n_samples']} samples"
-                 + (f"; validation RMSE {doc['validation']['rmse']:.4g} {units} on "
+    units = f" {units}" if units else ""
+    lines.append(f"fit RMSE {doc['fit']['rmse']:.4g}{units} on {doc['fit']['n_samples']} samples"
+                 + (f"; validation RMSE {doc['validation']['rmse']:.4g}{units} on "
                     f"{doc['validation']['n_samples']} samples" if "validation" in doc else ""))
     return "\n".join(lines)
 

@@ -366,7 +366,13 @@ def _inverse_plan(controller, est: Estimate, refs, u_last, N: int):
     fields = {k: v for k, v in vars(est).items() if v is not None}
     symbols = {k: ca.MX.sym(k, ca.MX(v).sparsity()) for k, v in fields.items()}
     refs_s, u_last_s = ca.MX.sym("refs", N), ca.MX.sym("u_last")
-    raw = _symbolic(lambda r: controller.inverse(Estimate(**symbols), r), "the inverse model", refs_s, N)
+    model = getattr(controller.inverse, "hysteresis", None)  # the default inverse: hystmpc's own model
+    if model is None:
+        what, advice = "the inverse model", "write it with casadi operations for a generated controller"
+    else:
+        what = f"{type(model).__name__}.inverse_step"
+        advice = "this model has no symbolic inverse yet, so no generated controller can warm-start from it"
+    raw = _symbolic(lambda r: controller.inverse(Estimate(**symbols), r), what, refs_s, N, advice)
     bounds = controller.bounds
     plan = _clip(ca.if_else(ca.fabs(raw) < ca.inf, raw, u_last_s), float(bounds.lower), float(bounds.upper))
     inputs = [*symbols.values(), refs_s, u_last_s]
@@ -375,9 +381,10 @@ def _inverse_plan(controller, est: Estimate, refs, u_last, N: int):
     return lambda needed: switch(needed, *fields.values(), refs, u_last)
 
 
-def _symbolic(fun, what: str, arg, size: int):
+def _symbolic(fun, what: str, arg, size: int,
+              advice: str = "write it with casadi operations for a generated controller"):
     """``fun(arg)`` on a CasADi symbol as a column of ``size`` entries, or :class:`NotGeneratable`
-    saying ``what`` has no CasADi form (or gives the wrong length)."""
+    saying ``what`` has no CasADi form (then ``advice``) or gives the wrong length."""
     try:
         with warnings.catch_warnings():  # a NumPy-only function on a CasADi symbol warns before it fails
             warnings.simplefilter("ignore")
@@ -386,7 +393,7 @@ def _symbolic(fun, what: str, arg, size: int):
             raise TypeError(f"returned {type(out).__name__}")
     except Exception as exc:  # noqa: BLE001 - any failure means the same thing here
         raise NotGeneratable(f"{what} does not accept CasADi expressions ({type(exc).__name__}: {exc}); "
-                             "write it with casadi operations for a generated controller") from None
+                             f"{advice}") from None
     if out.numel() != size:
         raise NotGeneratable(f"{what} gives {out.numel()} values on CasADi expressions, {size} expected")
     return ca.vec(out)

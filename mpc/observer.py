@@ -345,4 +345,5 @@ def memory_inverse(memory: InputMemory, sample_period: float) -> Callable[[Estim
             ws.append(hysteresis.output(state))
             out.append(u)
         return ca.vertcat(*out)
+    inverse.hysteresis = hysteresis  # whose inverse_step it runs (named when it has no CasADi form)
     return inverse

@@ -106,6 +106,8 @@ GOOD = (EXAMPLE / "piezo.toml").read_text()
     (GOOD.replace("sample_period = 0.001", "sample_period = -1"), "sample_period must be"),
     (GOOD.replace("[plant]", "[plant]\nmismatch = 3") .replace("mismatch = 0.05\n", ""), "mismatch"),
     (GOOD.replace("[sensor]", "[nmpc]\nhorizon = 1\n[sensor]"), "nmpc.horizon"),
+    (GOOD.replace("[sensor]", '[nmpc]\nhorizon = "20"\n[sensor]'), "nmpc.horizon = '20': expected a number"),
+    (GOOD.replace("[sensor]", "[nmpc]\npreview = 1\n[sensor]"), "nmpc.preview = 1: expected true or false"),
     ("name = 'x'\n[model\n", "not valid TOML"),
 ])
 def test_malformed_actuator_files_exit_2_naming_the_key(piezo, capsys, text, needle):

@@ -57,6 +57,15 @@ CASES = [
     (["run", "pam", "--controller", "pi", "--reference", "{tmp}/short.csv", "--duration", "10", "--no-plots"], 2,
      "--duration 10 s is longer than the reference file '{tmp}/short.csv' (2 s); allowed: up to 2 s"),
     (["run", "pam", "--controller", "pi", "--no-plots"], 2, "name a scenario (square-10"),
+    # options that would otherwise be ignored, and the command line itself
+    ([], 2, "name a command: list, run, compare"),
+    (["compare", "pam", "sine-30", "--controllers=", "--no-plots"], 2, "--controllers is empty; allowed: a "
+     "comma-separated list of pi, pi-hc"),
+    (["compare", "pam", "--no-plots", "sine-30", "--bogus"], 2, "unrecognized arguments: --bogus"),
+    (["codegen", "pam", "--duration", "5", "--out", "{tmp}/cg"], 2, "--duration 5 sets the length of the --verify "
+     "run; add --verify"),
+    (["identify", "prandtl-ishlinskii", "{tmp}/none.csv", "--dynamics-data", "{tmp}/none.csv"], 2,
+     "fits the dynamics, but --dynamics is none; allowed with it: --dynamics first-order or second-order"),
     # output paths, checked before any work
     (RUN + SHORT + ["--out", "{tmp}/a_file"], 2, "--out '{tmp}/a_file' is a file; give a folder"),
     (RUN + SHORT + ["--out", "{tmp}/full"], 2, "--out '{tmp}/full' already holds files; pass --overwrite"),
@@ -143,3 +152,39 @@ def test_list_bench_shows_keys_with_defaults_and_units(capsys):
     assert main(["list", "pam", "--json"]) == 0
     keys = {k["key"]: k for k in json.loads(capsys.readouterr().out)["benches"]["pam"]["keys"]}
     assert keys["nmpc.horizon"]["default"] == 20
+
+
+def test_scenario_names_may_follow_options(tmp_path):
+    out = tmp_path / "o"
+    assert main(["compare", "pam", "--no-plots", "sine-30", "--controllers", "pi", "--duration", "0.2",
+                 "--out", str(out), "--quiet"]) == 0
+    doc = json.loads((out / "results.json").read_text())
+    assert [r["scenario"] for r in doc["runs"]] == ["sine-30"]
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit) as stop:
+        main(["--version"])
+    assert stop.value.code == 0
+    from hystmpc.experiments.report import version
+    assert capsys.readouterr().out.strip() == f"hystmpc {version()}"
+
+
+def test_a_reference_file_keeps_the_named_scenarios_conditions(tmp_path):
+    from hystmpc.experiments.benches import get_bench
+    from hystmpc.experiments.cli import _scenario
+    bench = get_bench("reluctance")
+    named = bench.scenarios["ramp-1.2mm"]
+    assert named.conditions  # the gap it runs at
+    ref = tmp_path / "ref.csv"
+    ref.write_text("t,force\n0,1\n0.01,1.5\n")
+    assert _scenario(bench, "ramp-1.2mm", str(ref)).conditions == named.conditions
+    assert _scenario(bench, None, str(ref)).conditions == ()
+
+
+def test_identify_refuses_a_folder_as_its_model_file(capsys, tmp_path):
+    from pathlib import Path
+    slow = Path(__file__).parents[1] / "docs" / "examples" / "piezo" / "slow.csv"
+    assert main(["identify", "prandtl-ishlinskii", str(slow), "--out", f"{tmp_path}/new/", "--no-plots"]) == 2
+    assert "is a folder; name the model document's file" in capsys.readouterr().err
+    assert not (tmp_path / "new").exists()
