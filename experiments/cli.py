@@ -130,7 +130,7 @@ def build_parser() -> argparse.ArgumentParser:
                       "first-order, second-order (with a dead time)")
     p_id.add_argument("--dynamics-data", metavar="FAST.csv",
                       help="a faster record to fit the dynamics on (default: DATA.csv)")
-    p_id.add_argument("--max-delay", type=int, default=20, help="largest dead time tried (samples, default 20)")
+    p_id.add_argument("--max-delay", type=int, help="largest dead time tried (samples, default 20; with --dynamics)")
     p_id.add_argument("--units", default="", help="output units, recorded in the model document (e.g. um)")
     p_id.add_argument("--input-units", default="", help="input units (e.g. V)")
     p_id.add_argument("--data-file", dest="bench_data", metavar="FILE",
@@ -172,10 +172,11 @@ def _identify(args) -> int:
 
 def _identify_bench(args) -> int:
     for option, value in (("DATA.csv", args.data), ("--validate", args.validate),
-                          ("--dynamics-data", args.dynamics_data)):
-        if value:
+                          ("--dynamics-data", args.dynamics_data), ("--max-delay", args.max_delay),
+                          ("--units", args.units), ("--input-units", args.input_units)):
+        if value not in (None, ""):
             raise UsageError(f"{option} is for a model family; 'identify reluctance' takes its loops with "
-                             f"--data-file FILE")
+                             f"--data-file FILE (its units are A and N)")
     if args.dynamics != "none":
         raise UsageError("--dynamics is for a model family; the reluctance bench's model has no linear block")
     bench = _bench(args.family)
@@ -513,6 +514,10 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
     for scenario in scenarios:
         for condition in scenario.conditions:
             key = condition.split("=", 1)[0]
+            if key in user_keys and args.reference is not None:
+                raise UsageError(f"--set {key} conflicts with scenario {scenario_names[0]!r}, whose condition "
+                                 f"{condition} the reference file runs under; drop the scenario name to run the file "
+                                 "under other conditions")
             if key in user_keys:
                 raise UsageError(f"--set {key} conflicts with scenario {scenario.name!r}, which fixes "
                                  f"{condition}; use --reference for other conditions")
@@ -686,6 +691,8 @@ def _parse(argv: list[str]) -> argparse.Namespace:
         args.scenarios = [*args.scenarios, *names]
     elif extra and len(names) == len(extra) == 1 and args.command == "run" and args.scenario is None:
         args.scenario = names[0]
+    elif extra and len(names) == len(extra) == 1 and args.command == "identify" and args.data is None:
+        args.data = names[0]
     elif extra:
         options = [e for e in extra if e.startswith("-")]
         raise UsageError(f"unrecognized arguments: {' '.join(options or extra)}")

@@ -28,6 +28,10 @@ def _options(family: str, assignments: list[str]) -> dict:
     return options
 
 
+DEFAULT_MAX_DELAY = 20
+"""Largest dead time (samples) the dynamics fit tries unless ``--max-delay`` says."""
+
+
 def identify_command(args) -> int:
     """Run ``identify`` for a model family (``args`` from the ``hystmpc`` parser); returns the exit code."""
     from hystmpc.experiments.report import version
@@ -36,8 +40,12 @@ def identify_command(args) -> int:
     if args.dynamics_data and args.dynamics == "none":
         raise ValueError(f"--dynamics-data {args.dynamics_data} fits the dynamics, but --dynamics is none; "
                          "allowed with it: --dynamics first-order or second-order")
-    if not 0 <= args.max_delay <= 1000:
-        raise ValueError(f"--max-delay must be in [0, 1000] samples, got {args.max_delay}")
+    if args.max_delay is not None and args.dynamics == "none":
+        raise ValueError(f"--max-delay {args.max_delay} bounds the dynamics' dead time, but --dynamics is none; "
+                         "allowed with it: --dynamics first-order or second-order")
+    max_delay = DEFAULT_MAX_DELAY if args.max_delay is None else args.max_delay
+    if not 0 <= max_delay <= 1000:
+        raise ValueError(f"--max-delay must be in [0, 1000] samples, got {max_delay}")
     options = _options(args.family, args.overrides)
     u, y, period = load_record(args.data, "data file")
     validation = load_record(args.validate, "--validate file") if args.validate else None
@@ -53,7 +61,7 @@ def identify_command(args) -> int:
     except OSError as exc:
         raise ValueError(f"--out {str(out)!r} cannot be written ({exc.strerror or type(exc).__name__})") from None
     identified = identify(args.family, u, y, period, options, args.dynamics,
-                          None if fast is None else fast[:2], args.max_delay)
+                          None if fast is None else fast[:2], max_delay)
     val = None
     if validation is not None:
         predicted = identified.predict(validation[0])

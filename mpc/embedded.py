@@ -371,7 +371,8 @@ def _inverse_plan(controller, est: Estimate, refs, u_last, N: int):
         what, advice = "the inverse model", "write it with casadi operations for a generated controller"
     else:
         what = f"{type(model).__name__}.inverse_step"
-        advice = "this model has no symbolic inverse yet, so no generated controller can warm-start from it"
+        advice = ("this model has no symbolic inverse yet, so its whole controller is not generated (from Python, "
+                  "one with nmpc.warm_start=shift and its inverse set to None can be)")
     raw = _symbolic(lambda r: controller.inverse(Estimate(**symbols), r), what, refs_s, N, advice)
     bounds = controller.bounds
     plan = _clip(ca.if_else(ca.fabs(raw) < ca.inf, raw, u_last_s), float(bounds.lower), float(bounds.upper))

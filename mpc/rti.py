@@ -146,12 +146,12 @@ def gauss_newton_step(linearise: ca.Function, cost: ca.Function, lower, upper, n
 
 def _lowest_cost_step(cost: ca.Function, w, step, p, full, full_cost, step_lengths: tuple[float, ...]):
     """Of ``full = w + step`` (whose cost is ``full_cost``) and ``w + t step`` for each step
-    length ``t``, the one with the lowest cost."""
+    length ``t``, the one with the lowest cost (any cost beats a NaN or infinite one)."""
     w_next, best_cost = full, full_cost
     for t in step_lengths:
         trial = w + t * step
         trial_cost = cost(trial, p)
-        better = trial_cost < best_cost
+        better = ca.logic_or(trial_cost < best_cost, ca.logic_not(best_cost < ca.inf))  # x != x would fold away
         w_next = ca.if_else(better, trial, w_next)
         best_cost = ca.if_else(better, trial_cost, best_cost)
     return w_next

@@ -171,7 +171,7 @@ class RtiSettings:
                              "only (solver.rti.condensed=true)")
         if self.line_search != RtiSettings.line_search and not condensed:
             raise ValueError(f"solver.rti.line_search={self.line_search} applies to the condensed step only: the step "
-                             "over states and inputs takes the full step (solver.rti.condensed=true)")
+                             "over states and inputs takes the full step (set solver.rti.line_search=best with it)")
         if self.qp == "ipm" and not condensed:
             raise ValueError("solver.rti.qp=ipm needs solver.rti.condensed=true: the step over states and inputs "
                              "has unbounded states and solves with qrqp (set solver.rti.qp=daqp with it)")

@@ -26,6 +26,7 @@ FILES = {
     "spec_inf.toml": 'bench = "pam"\nduration = inf\n',
     "spec_ok.toml": 'bench = "pam"\nscenarios = ["square-20"]\ncontrollers = ["pi"]\nduration = 0.2\n',
     "a_file": "not a folder\n",
+    "force.csv": "t,force\n0,1\n0.01,1.5\n",
     "full/keep.txt": "a result the user keeps\n",
     "corrupt/sweep.json": "{not json",
 }
@@ -66,6 +67,14 @@ CASES = [
      "run; add --verify"),
     (["identify", "prandtl-ishlinskii", "{tmp}/none.csv", "--dynamics-data", "{tmp}/none.csv"], 2,
      "fits the dynamics, but --dynamics is none; allowed with it: --dynamics first-order or second-order"),
+    (["identify", "prandtl-ishlinskii", "{tmp}/none.csv", "--max-delay", "5"], 2,
+     "--max-delay 5 bounds the dynamics' dead time, but --dynamics is none"),
+    (["identify", "reluctance", "--units", "N"], 2, "--units is for a model family; 'identify reluctance' takes"),
+    (["run", "reluctance", "ramp-1.2mm", "--controller", "hyst-inverse", "--reference", "{tmp}/force.csv",
+      "--set", "rig.gap_mm=1.4", "--no-plots"], 2, "--set rig.gap_mm conflicts with scenario 'ramp-1.2mm', whose "
+     "condition rig.gap_mm=1.2 the reference file runs under; drop the scenario name"),
+    (["run", "reluctance", "ramp-1.2mm", "--controller", "nmpc", "--set", "solver.rti.condensed=false", "--no-plots",
+      "--duration", "0.01"], 2, "solver.rti.line_search=descent applies to the condensed step only"),
     # output paths, checked before any work
     (RUN + SHORT + ["--out", "{tmp}/a_file"], 2, "--out '{tmp}/a_file' is a file; give a folder"),
     (RUN + SHORT + ["--out", "{tmp}/full"], 2, "--out '{tmp}/full' already holds files; pass --overwrite"),

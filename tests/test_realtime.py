@@ -159,6 +159,12 @@ def test_descent_line_search_takes_a_full_step_that_lowers_the_cost():
     assert float(steps["best"](0.7, 0)[0]) == pytest.approx(0.7 + 0.5 * gn_step)
     for mode in ("best", "descent"):  # from 0.1 the full step (to the bound, 10) raises the cost
         assert float(steps[mode](0.1, 0)[0]) == pytest.approx(0.1 + 0.125 * 9.9)
+    # a full step whose cost is NaN (sqrt of a negative w) loses to any finite trial
+    root = ca.Function("r", [w, p], [ca.sqrt(w) - p])
+    for mode in ("best", "descent"):
+        step = rti_function(root, constraints, [], [], [-10.0], [10.0], step_lengths=(0.5, 0.25, 0.125),
+                            line_search=mode)
+        assert float(step(1.0, 0)[0]) == pytest.approx(0.0, abs=1e-6)  # the full step goes to -1, its half to 0
     with pytest.raises(ValueError, match="line_search 'newton' is unknown; allowed: best, descent"):
         rti_function(residual, constraints, [], [], [-10.0], [10.0], step_lengths=(0.5,), line_search="newton")
 
