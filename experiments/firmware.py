@@ -255,10 +255,11 @@ clean:
 
 
 def controller_config(bench: Bench, config: dict) -> dict:
-    """``config`` with ``nmpc.solver=rti``: the generated controller embeds the RTI step."""
+    """``config`` with ``nmpc.solver=rti`` (the generated controller embeds the RTI step)
+    and the controller run in Python (it is the one generated)."""
     if "nmpc" not in config:
         raise ValueError(f"bench {bench.name!r} has no nmpc settings")
-    return {**config, "nmpc": replace(config["nmpc"], solver="rti")}
+    return {**config, "nmpc": replace(config["nmpc"], solver="rti", runtime="python")}
 
 
 MICROCONTROLLER_SENSITIVITY_BLOCK = 7
@@ -283,13 +284,14 @@ def firmware_config(bench: Bench, config: dict) -> dict:
     return {**config, "solver": replace(solver, rti=rti)}
 
 
-def write_controller(bench: Bench, config: dict, out: Path, name: str | None = None) -> dict:
+def write_controller(bench: Bench, config: dict, out: Path, name: str | None = None, build: bool = True) -> dict:
     """Write the bench's whole NMPC controller as C into ``out`` and build it (shared library
     and example loop). Returns what was written: names, sizes, the memory layout.
 
     Raises :class:`~hystmpc.mpc.embedded.NotGeneratable` (a ``ValueError``) when the bench's
     controller cannot be generated, ``RuntimeError`` when the build fails. ``name`` (default:
-    the bench's name) becomes a C identifier: other characters turn into ``_``.
+    the bench's name) becomes a C identifier: other characters turn into ``_``. ``build``
+    false writes the sources and the Makefile only.
     """
     from hystmpc.experiments.report import version
     name = re.sub(r"\W", "_", name or bench.name, flags=re.ASCII)
@@ -339,7 +341,8 @@ def write_controller(bench: Bench, config: dict, out: Path, name: str | None = N
     include, libraries = library_flags(source)
     (out / "Makefile").write_text(MAKEFILE.format(name=name, cflags=" ".join(COMPILE_FLAGS),
                                                   qp_include=shlex.join(include), qp_libs=shlex.join(libraries)))
-    _build(out, name, include, libraries)
+    if build:
+        _build(out, name, include, libraries)
     c_bytes = sum((out / f).stat().st_size for f in (f"{name}_nmpc.c", f"{name}.c"))
     return {"name": name, "folder": str(out), "files": sorted(p.name for p in out.iterdir()),
             "memory_doubles": layout.size, "sensitivity_block": controller.solvers.rti.sensitivity_block,
@@ -420,6 +423,9 @@ class CompiledController:
         self._failures = self._lib[f"{name}_failures"]
         self._failures.restype = ctypes.c_long
         self._failures.argtypes = [ctypes.c_void_p]
+        self._z = (ctypes.c_double * len(self.sensor_names))()
+        self._refs = (ctypes.c_double * (self.horizon + 1))()
+        self._u = ctypes.c_double()
         self.reset()
 
     def reset(self) -> None:
@@ -429,13 +435,13 @@ class CompiledController:
 
     def step(self, measurement, ref_window) -> float:
         """``<name>_step`` then ``<name>_prepare``."""
-        z = np.ascontiguousarray(self._python.sensors(measurement), float)
-        refs = np.ascontiguousarray(ref_window, float).ravel()
+        refs = np.asarray(ref_window, float).ravel()
         if len(refs) != self.horizon + 1:
             raise ValueError(f"ref_window needs {self.horizon + 1} samples, got {len(refs)}")
-        u = ctypes.c_double()
-        status = self._step(self._ctrl, z.ctypes.data_as(ctypes.POINTER(ctypes.c_double)),
-                            refs.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), ctypes.byref(u))
+        self._z[:] = self._python.sensors(measurement).tolist()  # the buffers are reused: less time in ctypes
+        self._refs[:] = refs.tolist()
+        u = self._u
+        status = self._step(self._ctrl, self._z, self._refs, ctypes.byref(u))
         if status < 0:
             raise RuntimeError(f"{self._name}_step refused the call (status {status}): one controller instance per "
                                "loaded library")
@@ -444,8 +450,51 @@ class CompiledController:
         return u.value
 
     def stats(self) -> dict:
-        """Failures counted in C and the status codes seen."""
-        return {"name": "generated C", "failures": int(self._failures(self._ctrl)), "statuses": dict(self.statuses)}
+        """Failures counted in C (each one a fallback) and the status codes seen."""
+        failures = int(self._failures(self._ctrl))
+        return {"name": "generated C", "failures": failures, "fallbacks": failures, "statuses": dict(self.statuses)}
+
+
+def compiled_controller(bench: Bench, config: dict) -> CompiledController:
+    """The bench's NMPC as its whole generated controller (``nmpc.runtime=c``): written,
+    built once per distinct source and cached under ``<cache>/controllers/``, then loaded.
+
+    Without a C compiler it raises ``ValueError`` (the setting asks for compiled code);
+    a controller that cannot be generated raises :class:`~hystmpc.mpc.embedded.NotGeneratable`.
+    """
+    import hashlib
+    import tempfile
+
+    from hystmpc.mpc.rti import LOG, cache_dir
+    if config["nmpc"].solver not in ("rti", "rti-c"):
+        raise ValueError(f"nmpc.runtime=c runs the generated controller, whose solver is the RTI step; nmpc.solver is "
+                         f"{config['nmpc'].solver!r} (allowed with it: rti, rti-c)")
+    cc = c_compiler()
+    if cc is None:
+        raise ValueError("nmpc.runtime=c needs a C compiler (cc, or CC) on the PATH; set nmpc.runtime=python")
+    root = cache_dir() / "controllers"
+    root.mkdir(parents=True, exist_ok=True)
+    python = bench.build_controller("nmpc", controller_config(bench, config))
+    name = "controller"
+    written = Path(tempfile.mkdtemp(dir=root))
+    try:
+        write_controller(bench, config, written, name, build=False)
+        digest = hashlib.sha256(" ".join([*cc, *COMPILE_FLAGS]).encode())
+        for path in sorted(written.iterdir()):
+            digest.update(path.name.encode() + path.read_bytes())
+        folder = root / digest.hexdigest()[:20]
+        if not (folder / f"lib{name}.so").exists():
+            LOG.info(f"building the generated controller ({sum(p.stat().st_size for p in written.iterdir()) // 1000} "
+                     f"kB of C) for nmpc.runtime=c; once, cached in {root}")
+            include, libraries = library_flags((written / f"{name}_nmpc.c").read_text())
+            _build(written, name, include, libraries)
+            try:  # atomic: a folder there is always a whole build (another process may have made it first)
+                written.rename(folder)
+            except OSError:
+                pass
+    finally:
+        shutil.rmtree(written, ignore_errors=True)
+    return CompiledController(folder / f"lib{name}.so", name, python)
 
 
 def verify_controller(bench: Bench, config: dict, out: Path, name: str, duration: float | None = None) -> dict:

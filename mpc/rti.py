@@ -52,8 +52,9 @@ def rti_function(residual: ca.Function, constraints: ca.Function, lbg, ubg, lbx,
         linear constraints, not multiple shooting.
     line_search : {"best", "descent"}
         With ``step_lengths``: ``best`` evaluates the cost at every step length; ``descent``
-        takes the full step without trying the others when it lowers the cost (the generated
-        code then computes the shorter steps' costs only when it does not).
+        takes the full step without trying the others when it does not raise the cost (a
+        converged plan's zero step included); generated code computes the shorter steps'
+        costs only when it does.
     qp : {"qrqp", "daqp", "ipm"}
         ``qrqp``: CasADi's active-set solver (any bounds; wrong on some problems with
         inequality rows, see :mod:`hystmpc.mpc.qp`). ``daqp``: DAQP, a dual active-set
@@ -140,7 +141,7 @@ def gauss_newton_step(linearise: ca.Function, cost: ca.Function, lower, upper, n
                 f"{name}_line_search", ca.Function("full_step", args, [ws + steps]),
                 ca.Function("backtracking", args,
                             [_lowest_cost_step(cost, ws, steps, ps, ws + steps, costs, step_lengths)]))
-            w_next = switch(full_cost < current_cost[0], w, step, p, full_cost)
+            w_next = switch(full_cost <= current_cost[0], w, step, p, full_cost)
     return ca.Function(name, [w, p], [w_next, qp_error], ["w", "p"], ["w_next", "qp_error"])
 
 

@@ -20,6 +20,8 @@ problems condensed onto the inputs, with DAQP or the interior-point QP of :mod:`
 notice, when there is no C compiler); ``gn``, Gauss–Newton SQP to convergence
 (single-shooting problems only)."""
 WARM_STARTS = ("inverse", "shift", "cold")
+RUNTIMES = ("python", "c")
+"""Where the NMPC runs in closed loop (``nmpc.runtime``)."""
 
 
 def _check_finite(obj, names, low: float = 0.0, strict: bool = False) -> None:
@@ -51,12 +53,19 @@ class NmpcSettings:
     warm_start: str = "inverse"
     """Initial guess at start-up, after a reference jump and after a failure: 'inverse',
     'shift' (previous plan only, the last input at start) or 'cold' (zeros every step)."""
+    runtime: str = "python"
+    """Where the controller runs in closed loop: ``python``, or ``c``: the whole generated
+    controller that ``hystmpc codegen`` writes (estimator, warm start, RTI steps,
+    fallback), compiled once, cached, and called through ctypes; the same inputs, timed as
+    a rig runs it. Needs solver ``rti`` or ``rti-c`` and a C compiler."""
 
     def __post_init__(self):
         if self.horizon < 2:
             raise ValueError(f"horizon must be >= 2, got {self.horizon}")
         if self.solver not in SOLVERS:
             raise ValueError(f"solver {self.solver!r} is unknown; allowed: {', '.join(SOLVERS)}")
+        if self.runtime not in RUNTIMES:
+            raise ValueError(f"runtime {self.runtime!r} is unknown; allowed: {', '.join(RUNTIMES)}")
         if self.warm_start not in WARM_STARTS:
             raise ValueError(f"warm_start {self.warm_start!r} is unknown; allowed: {', '.join(WARM_STARTS)}")
         _check_finite(self, ("r_rate", "r_input"))
@@ -157,9 +166,9 @@ class RtiSettings:
     line_search: str = "best"
     """Step length of the condensed and single-shooting steps, among 1, 1/2, 1/4 and 1/8:
     ``best``, the one with the lowest cost (four cost evaluations per step); ``descent``,
-    the full step whenever it lowers the cost, else the best of the four (one evaluation
-    on most steps: a faster step, and a different one where a shorter step would have
-    lowered the cost more)."""
+    the full step whenever it does not raise the cost, else the best of the four (one
+    evaluation on most steps: a faster step, and a different one where a shorter step
+    would have lowered the cost more)."""
 
     def check_step(self, condensed: bool) -> None:
         """Refuse the settings this RTI step would not use (``ValueError``)."""

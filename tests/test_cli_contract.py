@@ -75,6 +75,9 @@ CASES = [
      "condition rig.gap_mm=1.2 the reference file runs under; drop the scenario name"),
     (["run", "reluctance", "ramp-1.2mm", "--controller", "nmpc", "--set", "solver.rti.condensed=false", "--no-plots",
       "--duration", "0.01"], 2, "solver.rti.line_search=descent applies to the condensed step only"),
+    (["run", "dea", "single-sine", "--controller", "nmpc", "--set", "nmpc.runtime=c", "--no-plots", "--duration",
+      "0.1"], 2, "nmpc.runtime=c runs the generated controller, whose solver is the RTI step; nmpc.solver is 'gn'"),
+    (RUN + SHORT + ["--set", "nmpc.runtime=fortran"], 2, "runtime 'fortran' is unknown; allowed: python, c"),
     # output paths, checked before any work
     (RUN + SHORT + ["--out", "{tmp}/a_file"], 2, "--out '{tmp}/a_file' is a file; give a folder"),
     (RUN + SHORT + ["--out", "{tmp}/full"], 2, "--out '{tmp}/full' already holds files; pass --overwrite"),

@@ -255,3 +255,24 @@ def test_a_microcontroller_build_pads_the_sensitivities_unless_told_otherwise():
     assert padded["solver"].rti.sensitivity_block == MICROCONTROLLER_SENSITIVITY_BLOCK
     assert firmware_config(pam, pam.configure(["solver.rti.sensitivity_block=3"]))["solver"].rti.sensitivity_block == 3
     assert firmware_config(dea, dea.configure())["solver"].rti.sensitivity_block == 0  # single shooting
+
+
+def test_runtime_c_runs_the_generated_controller_with_the_python_controllers_inputs():
+    """``nmpc.runtime=c``: the whole generated controller in the loop, built once and cached;
+    the same inputs as the Python controller to the last bit, its failures counted."""
+    import numpy as np
+
+    from hystmpc.experiments.benches import get_bench
+    from hystmpc.mpc.rti import c_compiler
+    if c_compiler() is None:
+        pytest.skip("no C compiler")
+    bench = get_bench("pam")
+    python = bench.run("square-20", "nmpc", duration=2.0)
+    config = bench.configure(["nmpc.runtime=c"])
+    generated = bench.run("square-20", "nmpc", config, duration=2.0)
+    assert np.array_equal(python.input, generated.input)
+    assert generated.solver["name"] == "generated C" and generated.solver["fallbacks"] == 0
+    again = bench.build_controller("nmpc", config)  # from the cache: a second instance runs as well
+    assert np.array_equal(bench.run("square-20", "nmpc", config, duration=2.0,
+                                    prepared=bench.prepare("square-20", "nmpc", config)).input, python.input)
+    assert type(again).__name__ == "CompiledController"
