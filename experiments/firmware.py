@@ -12,6 +12,7 @@ runs the bench's default scenario with the compiled controller driving the Pytho
 from __future__ import annotations
 
 import ctypes
+import os
 import re
 import shlex
 import shutil
@@ -378,14 +379,16 @@ def _sensor_doc(sensor: str, labels) -> str:
     return f"{sensor} ({unit})" if unit else sensor
 
 
-def _build(out: Path, name: str, include: list[str], libraries: list[str]) -> None:
+def _build(out: Path, name: str, include: list[str], libraries: list[str], example: bool = True) -> None:
     cc = c_compiler()
     if cc is None:
         raise RuntimeError("no C compiler (cc, or CC) on the PATH to build the controller")
     sources = [f"{name}.c", f"{name}_nmpc.c"]
-    for cmd in ([*cc, *COMPILE_FLAGS, *include, "-fPIC", "-shared", *sources, "-o", f"lib{name}.so", *libraries,
-                 "-lm"],
-                [*cc, *COMPILE_FLAGS, *include, "main.c", *sources, "-o", f"{name}_main", *libraries, "-lm"]):
+    commands = [[*cc, *COMPILE_FLAGS, *include, "-fPIC", "-shared", *sources, "-o", f"lib{name}.so", *libraries,
+                 "-lm"]]
+    if example:
+        commands.append([*cc, *COMPILE_FLAGS, *include, "main.c", *sources, "-o", f"{name}_main", *libraries, "-lm"])
+    for cmd in commands:
         done = subprocess.run(cmd, cwd=out, capture_output=True, text=True)
         if done.returncode != 0:
             raise RuntimeError(f"build failed ({' '.join(cmd)}): {done.stderr.strip()[:2000]}")
@@ -423,6 +426,9 @@ class CompiledController:
         self._failures = self._lib[f"{name}_failures"]
         self._failures.restype = ctypes.c_long
         self._failures.argtypes = [ctypes.c_void_p]
+        self._resets = self._lib[f"{name}_estimator_resets"]
+        self._resets.restype = ctypes.c_long
+        self._resets.argtypes = [ctypes.c_void_p]
         self._z = (ctypes.c_double * len(self.sensor_names))()
         self._refs = (ctypes.c_double * (self.horizon + 1))()
         self._u = ctypes.c_double()
@@ -450,50 +456,82 @@ class CompiledController:
         return u.value
 
     def stats(self) -> dict:
-        """Failures counted in C (each one a fallback) and the status codes seen."""
+        """Failures and estimator restarts counted in C (each failure a fallback) and the
+        statuses seen (no iteration counts: the RTI steps per sample are fixed)."""
         failures = int(self._failures(self._ctrl))
-        return {"name": "generated C", "failures": failures, "fallbacks": failures, "statuses": dict(self.statuses)}
+        return {"name": "generated C", "failures": failures, "fallbacks": failures,
+                "estimator_resets": int(self._resets(self._ctrl)),
+                "statuses": {STATUS_CODES.get(code, str(code)): n for code, n in self.statuses.items()}}
+
+
+def check_runtime(config: dict) -> None:
+    """``ValueError`` when ``nmpc.runtime=c`` cannot run: a solver the generated controller
+    does not have, or no C compiler. Cheap: no code is generated."""
+    settings = config.get("nmpc")
+    if settings is None or settings.runtime != "c":
+        return
+    if settings.solver not in ("rti", "rti-c"):
+        raise ValueError(f"nmpc.runtime=c runs the generated controller, whose solver is the RTI step; nmpc.solver is "
+                         f"{settings.solver!r} (allowed with it: rti, rti-c; or set nmpc.runtime=python)")
+    if c_compiler() is None:
+        where = f"CC={os.environ['CC']!r} is not an executable" if os.environ.get("CC") else "no cc on the PATH"
+        raise ValueError(f"nmpc.runtime=c needs a C compiler ({where}); set nmpc.runtime=python")
+
+
+STALE_BUILD_S = 3600.0
+"""A build folder left this long under ``<cache>/controllers/`` (a killed build) is removed."""
 
 
 def compiled_controller(bench: Bench, config: dict) -> CompiledController:
-    """The bench's NMPC as its whole generated controller (``nmpc.runtime=c``): written,
-    built once per distinct source and cached under ``<cache>/controllers/``, then loaded.
+    """The bench's NMPC as its whole generated controller (``nmpc.runtime=c``): written to a
+    temporary folder, hashed, built once per distinct source into
+    ``<cache>/controllers/<hash>`` (by an atomic rename), then loaded.
 
-    Without a C compiler it raises ``ValueError`` (the setting asks for compiled code);
-    a controller that cannot be generated raises :class:`~hystmpc.mpc.embedded.NotGeneratable`.
+    ``ValueError`` when it cannot run (:func:`check_runtime`) or cannot be generated.
     """
     import hashlib
     import tempfile
+    import time
 
+    from hystmpc.mpc.embedded import NotGeneratable
     from hystmpc.mpc.rti import LOG, cache_dir
-    if config["nmpc"].solver not in ("rti", "rti-c"):
-        raise ValueError(f"nmpc.runtime=c runs the generated controller, whose solver is the RTI step; nmpc.solver is "
-                         f"{config['nmpc'].solver!r} (allowed with it: rti, rti-c)")
+    check_runtime(config)
     cc = c_compiler()
-    if cc is None:
-        raise ValueError("nmpc.runtime=c needs a C compiler (cc, or CC) on the PATH; set nmpc.runtime=python")
-    root = cache_dir() / "controllers"
-    root.mkdir(parents=True, exist_ok=True)
     python = bench.build_controller("nmpc", controller_config(bench, config))
     name = "controller"
-    written = Path(tempfile.mkdtemp(dir=root))
-    try:
-        write_controller(bench, config, written, name, build=False)
+    root = cache_dir() / "controllers"
+    with tempfile.TemporaryDirectory(prefix="hystmpc-controller-") as scratch:  # a cache hit writes nothing there
+        written = Path(scratch) / "c"
+        try:
+            write_controller(bench, config, written, name, build=False)
+        except NotGeneratable as exc:
+            raise ValueError(f"nmpc.runtime=c: {exc}; or set nmpc.runtime=python") from None
         digest = hashlib.sha256(" ".join([*cc, *COMPILE_FLAGS]).encode())
         for path in sorted(written.iterdir()):
             digest.update(path.name.encode() + path.read_bytes())
         folder = root / digest.hexdigest()[:20]
-        if not (folder / f"lib{name}.so").exists():
-            LOG.info(f"building the generated controller ({sum(p.stat().st_size for p in written.iterdir()) // 1000} "
-                     f"kB of C) for nmpc.runtime=c; once, cached in {root}")
-            include, libraries = library_flags((written / f"{name}_nmpc.c").read_text())
-            _build(written, name, include, libraries)
+        if (folder / f"lib{name}.so").exists():
+            return CompiledController(folder / f"lib{name}.so", name, python)
+        LOG.info(f"building the generated controller ({sum(p.stat().st_size for p in written.iterdir()) // 1000} kB "
+                 f"of C) for nmpc.runtime=c; once, cached in {root}")
+        include, libraries = library_flags((written / f"{name}_nmpc.c").read_text())
+        _build(written, name, include, libraries, example=False)
+        root.mkdir(parents=True, exist_ok=True)
+        for stale in root.glob("building-*"):  # left by a killed build
+            if time.time() - stale.stat().st_mtime > STALE_BUILD_S:
+                shutil.rmtree(stale, ignore_errors=True)
+        staging = Path(tempfile.mkdtemp(prefix="building-", dir=root))
+        try:
+            shutil.copytree(written, staging, dirs_exist_ok=True)
+            staging.chmod(0o755)
+            if folder.exists() and not (folder / f"lib{name}.so").exists():  # damaged: replace it
+                shutil.rmtree(folder, ignore_errors=True)
             try:  # atomic: a folder there is always a whole build (another process may have made it first)
-                written.rename(folder)
+                staging.rename(folder)
             except OSError:
                 pass
-    finally:
-        shutil.rmtree(written, ignore_errors=True)
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
     return CompiledController(folder / f"lib{name}.so", name, python)
 
 

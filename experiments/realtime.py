@@ -129,6 +129,10 @@ def _problem_of(controller):
 def _rti_config(bench: Bench, config: dict, solver: str) -> dict:
     if "nmpc" not in config:
         raise ValueError(f"bench {bench.name!r} has no nmpc settings")
+    if config["nmpc"].runtime != "python":
+        raise ValueError(f"nmpc.runtime={config['nmpc'].runtime} runs the generated controller in run, compare and "
+                         "sweep; codegen writes it and speed times the Python solver variants, whatever it says: "
+                         "drop the setting here")
     return {**config, "nmpc": replace(config["nmpc"], solver=solver)}
 
 

@@ -206,6 +206,9 @@ def load_spec(path: str | Path, extra_overrides: Iterable[str] = (), duration: f
         for name, n in per_scenario.items():
             check_run_samples(n, f"a run of {name}", force)
         check_horizons(config, force)
+        if "nmpc" in controllers:
+            from hystmpc.experiments.firmware import check_runtime
+            check_runtime(config)
         check_sweep(spec.n_runs, sum(per_scenario.values()) * spec.n_runs // len(scenarios), force)
     except ValueError as exc:
         _fail(path, str(exc))

@@ -141,7 +141,8 @@ def gauss_newton_step(linearise: ca.Function, cost: ca.Function, lower, upper, n
                 f"{name}_line_search", ca.Function("full_step", args, [ws + steps]),
                 ca.Function("backtracking", args,
                             [_lowest_cost_step(cost, ws, steps, ps, ws + steps, costs, step_lengths)]))
-            w_next = switch(full_cost <= current_cost[0], w, step, p, full_cost)
+            keep = ca.logic_and(full_cost <= current_cost[0], full_cost < ca.inf)  # inf <= inf: backtrack
+            w_next = switch(keep, w, step, p, full_cost)
     return ca.Function(name, [w, p], [w_next, qp_error], ["w", "p"], ["w_next", "qp_error"])
 
 

@@ -257,15 +257,17 @@ def test_a_microcontroller_build_pads_the_sensitivities_unless_told_otherwise():
     assert firmware_config(dea, dea.configure())["solver"].rti.sensitivity_block == 0  # single shooting
 
 
-def test_runtime_c_runs_the_generated_controller_with_the_python_controllers_inputs():
-    """``nmpc.runtime=c``: the whole generated controller in the loop, built once and cached;
-    the same inputs as the Python controller to the last bit, its failures counted."""
+def test_runtime_c_runs_the_generated_controller_with_the_python_controllers_inputs(tmp_path, monkeypatch):
+    """``nmpc.runtime=c``: the whole generated controller in the loop, built once and cached
+    (a damaged cache entry is built again); the same inputs as the Python controller to the
+    last bit, its failures counted."""
     import numpy as np
 
     from hystmpc.experiments.benches import get_bench
     from hystmpc.mpc.rti import c_compiler
     if c_compiler() is None:
         pytest.skip("no C compiler")
+    monkeypatch.setenv("HYSTMPC_CACHE", str(tmp_path))
     bench = get_bench("pam")
     python = bench.run("square-20", "nmpc", duration=2.0)
     config = bench.configure(["nmpc.runtime=c"])
@@ -276,3 +278,7 @@ def test_runtime_c_runs_the_generated_controller_with_the_python_controllers_inp
     assert np.array_equal(bench.run("square-20", "nmpc", config, duration=2.0,
                                     prepared=bench.prepare("square-20", "nmpc", config)).input, python.input)
     assert type(again).__name__ == "CompiledController"
+    [entry] = (tmp_path / "controllers").iterdir()
+    (entry / "libcontroller.so").unlink()  # as the cached Makefile's 'clean' would
+    assert np.array_equal(bench.run("square-20", "nmpc", config, duration=2.0).input, python.input)
+    assert (entry / "libcontroller.so").exists() and not list((tmp_path / "controllers").glob("building-*"))
