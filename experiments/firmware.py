@@ -484,8 +484,8 @@ STALE_BUILD_S = 3600.0
 
 def compiled_controller(bench: Bench, config: dict) -> CompiledController:
     """The bench's NMPC as its whole generated controller (``nmpc.runtime=c``): written to a
-    temporary folder, hashed, built once per distinct source into
-    ``<cache>/controllers/<hash>`` (by an atomic rename), then loaded.
+    temporary folder, hashed (with the compiler, its flags and the QP library's), built once
+    per distinct source into ``<cache>/controllers/<hash>`` (by an atomic rename), then loaded.
 
     ``ValueError`` when it cannot run (:func:`check_runtime`) or cannot be generated.
     """
@@ -506,7 +506,8 @@ def compiled_controller(bench: Bench, config: dict) -> CompiledController:
             write_controller(bench, config, written, name, build=False)
         except NotGeneratable as exc:
             raise ValueError(f"nmpc.runtime=c: {exc}; or set nmpc.runtime=python") from None
-        digest = hashlib.sha256(" ".join([*cc, *COMPILE_FLAGS]).encode())
+        include, libraries = library_flags((written / f"{name}_nmpc.c").read_text())
+        digest = hashlib.sha256(" ".join([*cc, *COMPILE_FLAGS, *include, *libraries]).encode())
         for path in sorted(written.iterdir()):
             digest.update(path.name.encode() + path.read_bytes())
         folder = root / digest.hexdigest()[:20]
@@ -514,7 +515,6 @@ def compiled_controller(bench: Bench, config: dict) -> CompiledController:
             return CompiledController(folder / f"lib{name}.so", name, python)
         LOG.info(f"building the generated controller ({sum(p.stat().st_size for p in written.iterdir()) // 1000} kB "
                  f"of C) for nmpc.runtime=c; once, cached in {root}")
-        include, libraries = library_flags((written / f"{name}_nmpc.c").read_text())
         _build(written, name, include, libraries, example=False)
         root.mkdir(parents=True, exist_ok=True)
         for stale in root.glob("building-*"):  # left by a killed build
