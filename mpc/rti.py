@@ -22,11 +22,10 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from hystmpc.mpc.settings import LINE_SEARCHES
+
 QP_SOLVERS = ("qrqp", "daqp", "ipm")
 """QP solvers of the Gauss–Newton step (:func:`gauss_newton_step`)."""
-
-LINE_SEARCHES = ("best", "descent")
-"""How :func:`gauss_newton_step` picks its step length (``solver.rti.line_search``)."""
 
 REGULARISATION = 1e-8
 """Added to the diagonal of JᵀJ: states enter the cost only through constraints."""

@@ -22,6 +22,8 @@ notice, when there is no C compiler); ``gn``, Gauss–Newton SQP to convergence
 WARM_STARTS = ("inverse", "shift", "cold")
 RUNTIMES = ("python", "c")
 """Where the NMPC runs in closed loop (``nmpc.runtime``)."""
+LINE_SEARCHES = ("best", "descent")
+"""How the Gauss–Newton step picks its step length (``solver.rti.line_search``)."""
 
 
 def _check_finite(obj, names, low: float = 0.0, strict: bool = False) -> None:
@@ -188,8 +190,8 @@ class RtiSettings:
     def __post_init__(self):
         if self.qp not in ("daqp", "ipm"):
             raise ValueError(f"qp must be one of daqp, ipm, got {self.qp!r}")
-        if self.line_search not in ("best", "descent"):
-            raise ValueError(f"line_search must be one of best, descent, got {self.line_search!r}")
+        if self.line_search not in LINE_SEARCHES:
+            raise ValueError(f"line_search must be one of {', '.join(LINE_SEARCHES)}, got {self.line_search!r}")
         if self.iterations < 1:
             raise ValueError(f"iterations must be >= 1, got {self.iterations}")
         if self.sensitivity_block < 0:
