@@ -110,9 +110,10 @@ class Bench:
         if name not in self.controllers:
             raise ValueError(f"unknown controller {name!r}; allowed: {', '.join(self.controllers)}")
         spec = self.controllers[name]
-        if name == "nmpc" and getattr(config.get("nmpc"), "runtime", "python") == "c":
-            from hystmpc.experiments.firmware import compiled_controller
-            return compiled_controller(self, config)
+        if name == "nmpc":
+            from hystmpc.experiments.firmware import compiled_controller, runs_generated
+            if runs_generated(config):
+                return compiled_controller(self, config)
         return spec.build(self._groups(config, spec.groups, f"controller {name!r}"))
 
     def scenario(self, name: str) -> Scenario:

@@ -464,30 +464,46 @@ class CompiledController:
                 "statuses": {STATUS_CODES.get(code, str(code)): n for code, n in self.statuses.items()}}
 
 
+RTI_SOLVERS = ("rti", "rti-c")
+"""The solvers the generated controller has (its RTI step)."""
+
+
+def runs_generated(config: dict) -> bool:
+    """Whether ``run``, ``compare`` and ``sweep`` drive the generated controller:
+    ``nmpc.runtime=c``, or ``auto`` with an RTI solver."""
+    settings = config.get("nmpc")
+    runtime = getattr(settings, "runtime", "python")
+    return runtime == "c" or (runtime == "auto" and settings.solver in RTI_SOLVERS)
+
+
 def check_runtime(config: dict) -> None:
     """``ValueError`` when ``nmpc.runtime=c`` cannot run: a solver the generated controller
     does not have, or no C compiler. Cheap: no code is generated."""
     settings = config.get("nmpc")
     if settings is None or settings.runtime != "c":
         return
-    if settings.solver not in ("rti", "rti-c"):
+    if settings.solver not in RTI_SOLVERS:
         raise ValueError(f"nmpc.runtime=c runs the generated controller, whose solver is the RTI step; nmpc.solver is "
-                         f"{settings.solver!r} (allowed with it: rti, rti-c; or set nmpc.runtime=python)")
+                         f"{settings.solver!r} (allowed with it: {', '.join(RTI_SOLVERS)}; or set nmpc.runtime=python "
+                         "or auto)")
     if c_compiler() is None:
         where = f"CC={os.environ['CC']!r} is not an executable" if os.environ.get("CC") else "no cc on the PATH"
-        raise ValueError(f"nmpc.runtime=c needs a C compiler ({where}); set nmpc.runtime=python")
+        raise ValueError(f"nmpc.runtime=c needs a C compiler ({where}); set nmpc.runtime=python or auto")
 
 
 STALE_BUILD_S = 3600.0
 """A build folder left this long under ``<cache>/controllers/`` (a killed build) is removed."""
 
 
-def compiled_controller(bench: Bench, config: dict) -> CompiledController:
-    """The bench's NMPC as its whole generated controller (``nmpc.runtime=c``): written to a
-    temporary folder, hashed (with the compiler, its flags and the QP library's), built once
-    per distinct source into ``<cache>/controllers/<hash>`` (by an atomic rename), then loaded.
+def compiled_controller(bench: Bench, config: dict):
+    """The bench's NMPC as its whole generated controller (``nmpc.runtime=c`` or ``auto``):
+    written to a temporary folder, hashed (with the compiler, its flags and the QP library's),
+    built once per distinct source into ``<cache>/controllers/<hash>`` (by an atomic rename),
+    then loaded as a :class:`CompiledController`.
 
-    ``ValueError`` when it cannot run (:func:`check_runtime`) or cannot be generated.
+    ``ValueError`` when it cannot run (:func:`check_runtime`) or cannot be generated. With
+    ``auto``, no C compiler or a model that cannot be generated gives the same controller in
+    Python instead, after a one-line notice.
     """
     import hashlib
     import tempfile
@@ -498,6 +514,9 @@ def compiled_controller(bench: Bench, config: dict) -> CompiledController:
     check_runtime(config)
     cc = c_compiler()
     python = bench.build_controller("nmpc", controller_config(bench, config))
+    if cc is None:  # runtime=auto: check_runtime refuses runtime=c without a compiler
+        LOG.warning("no C compiler (cc, or CC) on the PATH: nmpc.runtime=auto runs the controller in Python, slower")
+        return python
     name = "controller"
     root = cache_dir() / "controllers"
     with tempfile.TemporaryDirectory(prefix="hystmpc-controller-") as scratch:  # a cache hit writes nothing there
@@ -505,7 +524,10 @@ def compiled_controller(bench: Bench, config: dict) -> CompiledController:
         try:
             write_controller(bench, config, written, name, build=False)
         except NotGeneratable as exc:
-            raise ValueError(f"nmpc.runtime=c: {exc}; or set nmpc.runtime=python") from None
+            if config["nmpc"].runtime == "auto":
+                LOG.warning(f"{exc}: nmpc.runtime=auto runs the controller in Python")
+                return python
+            raise ValueError(f"nmpc.runtime=c: {exc}; or set nmpc.runtime=python or auto") from None
         include, libraries = library_flags((written / f"{name}_nmpc.c").read_text())
         digest = hashlib.sha256(" ".join([*cc, *COMPILE_FLAGS, *include, *libraries]).encode())
         for path in sorted(written.iterdir()):

@@ -20,7 +20,7 @@ problems condensed onto the inputs, with DAQP or the interior-point QP of :mod:`
 notice, when there is no C compiler); ``gn``, Gauss–Newton SQP to convergence
 (single-shooting problems only)."""
 WARM_STARTS = ("inverse", "shift", "cold")
-RUNTIMES = ("python", "c")
+RUNTIMES = ("python", "c", "auto")
 """Where the NMPC runs in closed loop (``nmpc.runtime``)."""
 LINE_SEARCHES = ("best", "descent")
 """How the Gauss–Newton step picks its step length (``solver.rti.line_search``)."""
@@ -56,10 +56,12 @@ class NmpcSettings:
     """Initial guess at start-up, after a reference jump and after a failure: 'inverse',
     'shift' (previous plan only, the last input at start) or 'cold' (zeros every step)."""
     runtime: str = "python"
-    """Where the controller runs in closed loop: ``python``, or ``c``: the whole generated
+    """Where the controller runs in closed loop: ``python``; ``c``: the whole generated
     controller that ``hystmpc codegen`` writes (estimator, warm start, RTI steps,
     fallback), compiled once, cached, and called through ctypes; the same inputs, timed as
-    a rig runs it. Needs solver ``rti`` or ``rti-c`` and a C compiler."""
+    a rig runs it, but no predicted output in the results (needs solver ``rti`` or ``rti-c``
+    and a C compiler); ``auto``: ``c`` with an RTI solver, else ``python`` (after a notice
+    when only the C compiler is missing)."""
 
     def __post_init__(self):
         if self.horizon < 2:

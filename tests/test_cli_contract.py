@@ -77,7 +77,9 @@ CASES = [
       "--duration", "0.01"], 2, "solver.rti.line_search=descent applies to the condensed step only"),
     (["run", "dea", "single-sine", "--controller", "nmpc", "--set", "nmpc.runtime=c", "--no-plots", "--duration",
       "0.1"], 2, "nmpc.runtime=c runs the generated controller, whose solver is the RTI step; nmpc.solver is 'gn'"),
-    (RUN + SHORT + ["--set", "nmpc.runtime=fortran"], 2, "runtime 'fortran' is unknown; allowed: python, c"),
+    (RUN + SHORT + ["--set", "nmpc.runtime=fortran"], 2, "runtime 'fortran' is unknown; allowed: python, c, auto"),
+    (["speed", "reluctance", "--set", "nmpc.runtime=python"], 2, "nmpc.runtime=python chooses where run, compare and "
+     "sweep run the controller; codegen writes the generated controller and speed times the solver variants"),
     # output paths, checked before any work
     (RUN + SHORT + ["--out", "{tmp}/a_file"], 2, "--out '{tmp}/a_file' is a file; give a folder"),
     (RUN + SHORT + ["--out", "{tmp}/full"], 2, "--out '{tmp}/full' already holds files; pass --overwrite"),

@@ -22,7 +22,7 @@ def _pam(*assignments):
 def _python_and_generated(bench_name: str, scenario: str, duration: float, assignments=()):
     """The Python controller's run and its Functions' run (in-process) on the same plant."""
     bench = get_bench(bench_name)
-    config = bench.configure(["nmpc.solver=rti", *assignments])
+    config = bench.configure(["nmpc.solver=rti", "nmpc.runtime=python", *assignments])
     python = bench.run(scenario, "nmpc", config, duration=duration)
     prepared = bench.prepare(scenario, "nmpc", config)
     functions = FunctionController(prepared.controller, *controller_functions(prepared.controller))

@@ -282,3 +282,24 @@ def test_runtime_c_runs_the_generated_controller_with_the_python_controllers_inp
     (entry / "libcontroller.so").unlink()  # as the cached Makefile's 'clean' would
     assert np.array_equal(bench.run("square-20", "nmpc", config, duration=2.0).input, python.input)
     assert (entry / "libcontroller.so").exists() and not list((tmp_path / "controllers").glob("building-*"))
+
+
+def test_runtime_auto_runs_the_generated_controller_where_it_can(tmp_path, monkeypatch, caplog):
+    """``nmpc.runtime=auto`` (reluctance's default): the generated controller with an RTI
+    solver and a C compiler; the Python controller with another solver, and without a
+    compiler after a notice, where ``runtime=c`` is refused."""
+    from hystmpc.mpc.rti import c_compiler
+    if c_compiler() is None:
+        pytest.skip("no C compiler")
+    monkeypatch.setenv("HYSTMPC_CACHE", str(tmp_path))
+    bench = get_bench("reluctance")
+    assert bench.configure()["nmpc"].runtime == "auto"
+    assert type(bench.build_controller("nmpc", bench.configure())).__name__ == "CompiledController"
+    assert type(bench.build_controller("nmpc", bench.configure(["nmpc.solver=sqp"]))).__name__ == "NmpcController"
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
+    with caplog.at_level("WARNING", logger="hystmpc"):
+        fallback = bench.build_controller("nmpc", bench.configure())
+    assert type(fallback).__name__ == "NmpcController"
+    assert "nmpc.runtime=auto runs the controller in Python" in caplog.text
+    with pytest.raises(ValueError, match="nmpc.runtime=c needs a C compiler"):
+        bench.build_controller("nmpc", bench.configure(["nmpc.runtime=c"]))

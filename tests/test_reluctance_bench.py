@@ -117,7 +117,8 @@ def test_the_nmpc_model_reads_the_table_exactly_or_rounded():
     with pytest.raises(ValueError, match="kink_eps must be finite and >= 0"):
         apply_overrides(config, ["table.kink_eps=-1"])
     kink = np.r_[np.zeros(4), xs[len(xs) // 2]]  # H's state with its output X on a kink
-    outputs = [float(BENCH.build_controller("nmpc", apply_overrides(config, [f"table.kink_eps={eps}"]))
+    outputs = [float(BENCH.build_controller("nmpc", apply_overrides(config, ["nmpc.runtime=python",
+                                                                         f"table.kink_eps={eps}"]))
                      .model.output(kink, []))
                for eps in (0.0, 1e-4)]
     assert outputs[0] == pytest.approx(fs[len(xs) // 2], rel=1e-14)

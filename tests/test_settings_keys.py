@@ -57,7 +57,11 @@ def _changed(bench_name: str, key: str, value) -> str:
 
 
 def _activation(key: str) -> list[str]:
-    return [a for prefix, assignments in ACTIVATE.items() if key.startswith(prefix) for a in assignments]
+    """The assignments that switch on what reads ``key``, and the Python runtime: the probes
+    read the Python controller's iterations and RTI step (the generated controller's inputs
+    are the same; its own test checks that)."""
+    return ["nmpc.runtime=python", *(a for prefix, assignments in ACTIVATE.items() if key.startswith(prefix)
+                                     for a in assignments)]
 
 
 def _fixed_inputs(bench, n: int) -> np.ndarray:
