@@ -104,6 +104,11 @@ class NmpcController:
                       "the model's Dynamics give no steady_input (the hysteresis output that holds an output at rest)")
             raise ValueError(f"no default inverse model for the warm start and r_input: {reason}; give inverse=..., "
                              "or use nmpc.warm_start=shift with nmpc.r_input=0")
+        if settings.multistart and (settings.solver != "gn" or inverse is None):
+            raise ValueError(f"nmpc.multistart compares the costs that solver gn reports, from the shifted plan and "
+                             f"from the inverse model's inputs; nmpc.solver is {settings.solver!r}"
+                             + ("" if inverse is not None else " and there is no inverse model")
+                             + " (allowed with it: gn)")
         self.inverse = inverse
         self.jump_threshold = float(jump_threshold)
         self.reset()
@@ -128,6 +133,7 @@ class NmpcController:
         self.failures = 0
         self.fallbacks = 0
         self.reinitialisations = 0
+        self.inverse_starts_kept = 0
         self.estimator_resets = 0
         self.iterations: list[int] = []
         self.solve_times: list[float] = []
@@ -177,8 +183,18 @@ class NmpcController:
         else:
             u_guess, x_guess = self._initial_guess(u_inv, jump, est)
             u_ff = u_inv() if self.settings.r_input > 0 else np.zeros(N)  # zero weight: value unused
-            result = self.problem.solve(self.observer.condition(est), self._u_last, refs, u_guess, x_guess,
-                                        u_ff=u_ff)
+            condition = self.observer.condition(est)
+            result = self.problem.solve(condition, self._u_last, refs, u_guess, x_guess, u_ff=u_ff)
+            if self.settings.multistart and self._plan is not None and not jump:  # else u_guess was the inverse
+                other = self.problem.solve(condition, self._u_last, refs, u_inv(), None, u_ff=u_ff)
+                if other.success and (not result.success or other.cost < result.cost):
+                    self.inverse_starts_kept += 1
+                    other.solve_time += result.solve_time
+                    other.iterations += result.iterations
+                    result = other
+                else:
+                    result.solve_time += other.solve_time
+                    result.iterations += other.iterations
             if result.success and not np.all(np.isfinite(result.u_plan)):
                 result.success, result.status = False, f"{result.status}_Non_Finite"
         self.iterations.append(result.iterations)
@@ -231,4 +247,5 @@ class NmpcController:
         return {"name": self.settings.solver, "failures": self.failures, "fallbacks": self.fallbacks,
                 "iterations_median": float(np.median(its)), "iterations_max": int(its.max()),
                 "reinitialisations": self.reinitialisations, "estimator_resets": self.estimator_resets,
-                "statuses": dict(self.statuses)}
+                "statuses": dict(self.statuses),
+                **({"inverse_starts_kept": self.inverse_starts_kept} if self.settings.multistart else {})}

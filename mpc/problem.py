@@ -35,6 +35,8 @@ class Solution:
     """Solver iterations."""
     solve_time: float
     """Wall-clock time of the solve (s)."""
+    cost: float = float("nan")
+    """The objective at ``u_plan``, where the solver reports it (``gn``)."""
 
 
 def nlp_solver(name: str, nlp: dict, solver: str, settings: NlpSettings) -> ca.Function:

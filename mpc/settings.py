@@ -55,6 +55,11 @@ class NmpcSettings:
     warm_start: str = "inverse"
     """Initial guess at start-up, after a reference jump and after a failure: 'inverse',
     'shift' (previous plan only, the last input at start) or 'cold' (zeros every step)."""
+    multistart: bool = False
+    """Each sample, also solve from the inverse model's inputs and keep the plan with the
+    lower cost. Across a hysteresis loop the tracking problem has several local minima, and
+    the shifted plan can sit in the worse one (dea: RMSE 0.0034 -> 0.0013 mm on single-sine
+    with ``r_rate`` 0.01, at twice the solves). Needs solver ``gn`` and an inverse model."""
     runtime: str = "python"
     """Where the controller runs in closed loop: ``python``; ``c``: the whole generated
     controller that ``hystmpc codegen`` writes (estimator, warm start, RTI steps,

@@ -153,14 +153,15 @@ class SingleShootingProblem(TrackingProblem):
             self.rti, self.compiled = compiled_or_in_process(self.rti)
 
     def _solve_gauss_newton(self, u, p):
-        """Gauss–Newton SQP: QP on JᵀJ, backtracking on the cost; returns (u, ok, status, iters)."""
+        """Gauss–Newton SQP: QP on JᵀJ, backtracking on the cost; returns
+        (u, ok, status, iters, cost at u)."""
         gn, N = self.solvers.gn, self.horizon
         u_prev = p[self.n_condition]
         res, J = (np.asarray(v) for v in self._gn_eval(u, p))
         res = res.ravel()
         cost = float(res @ res)
         if not np.isfinite(cost):
-            return u, False, "Non_Finite_Cost", 0
+            return u, False, "Non_Finite_Cost", 0, cost
         for it in range(1, gn.max_iter + 1):
             H = J.T @ J + 1e-10 * np.eye(N)
             g = J.T @ res
@@ -171,7 +172,7 @@ class SingleShootingProblem(TrackingProblem):
             sol = self._qp(**args)
             step = np.asarray(sol["x"]).ravel()
             if not np.all(np.isfinite(step)):
-                return u, False, "QP_Failed", it
+                return u, False, "QP_Failed", it, cost
             t = 1.0
             while t > 1e-3:
                 trial = u + t * step
@@ -182,12 +183,12 @@ class SingleShootingProblem(TrackingProblem):
                 t *= 0.5
             else:  # no descent left: stationary, unless the cost stopped being a number
                 finite = np.isfinite(cost_t)
-                return u, bool(finite), "Solve_Succeeded" if finite else "Non_Finite_Cost", it
+                return u, bool(finite), "Solve_Succeeded" if finite else "Non_Finite_Cost", it, cost
             stalled = cost - cost_t < gn.ftol * cost
             u, res, J, cost = trial, res_t.ravel(), J_t, cost_t
             if np.max(np.abs(t * step)) <= gn.tol * (1.0 + np.max(np.abs(u))) or stalled:
-                return u, True, "Solve_Succeeded", it
-        return u, False, "Maximum_Iterations_Exceeded", gn.max_iter
+                return u, True, "Solve_Succeeded", it, cost
+        return u, False, "Maximum_Iterations_Exceeded", gn.max_iter, cost
 
     def solve(self, condition, u_prev: float, ref, u_guess, x_guess=None, u_ff=None) -> Solution:
         """Solve for the references ``ref`` (r_{k+1..k+N}) from ``condition`` (the ``p`` of ``predict``).
@@ -203,11 +204,11 @@ class SingleShootingProblem(TrackingProblem):
                                    lambda w, finite: (w.reshape(N, 1), None))
         if self.settings.solver == "gn":
             start = time.perf_counter()
-            u, success, status, iterations = self._solve_gauss_newton(u_guess, p)
+            u, success, status, iterations, cost = self._solve_gauss_newton(u_guess, p)
             elapsed = time.perf_counter() - start
             success = success and bool(np.all(np.isfinite(u)))
             return Solution(u_plan=u.reshape(N, 1), x_plan=None, success=success, status=status,
-                            iterations=iterations, solve_time=elapsed)
+                            iterations=iterations, solve_time=elapsed, cost=cost)
         u, success, status, iterations, elapsed = self._solve_nlp({"x0": u_guess, "p": p, **self._bounds}, warm=True)
         return Solution(u_plan=u.reshape(N, 1), x_plan=None, success=success, status=status,
                         iterations=iterations, solve_time=elapsed)

@@ -78,6 +78,9 @@ CASES = [
     (["run", "dea", "single-sine", "--controller", "nmpc", "--set", "nmpc.runtime=c", "--no-plots", "--duration",
       "0.1"], 2, "nmpc.runtime=c runs the generated controller, whose solver is the RTI step; nmpc.solver is 'gn'"),
     (RUN + SHORT + ["--set", "nmpc.runtime=fortran"], 2, "runtime 'fortran' is unknown; allowed: python, c, auto"),
+    (["run", "pam", "square-20", "--controller", "nmpc", "--set", "nmpc.multistart=true", "--no-plots", "--duration",
+      "0.1"], 2, "nmpc.multistart compares the costs that solver gn reports, from the shifted plan and from the "
+     "inverse model's inputs; nmpc.solver is 'rti-c' (allowed with it: gn)"),
     (["speed", "reluctance", "--set", "nmpc.runtime=python"], 2, "nmpc.runtime=python chooses where run, compare and "
      "sweep run the controller; codegen writes the generated controller and speed times the solver variants"),
     # output paths, checked before any work

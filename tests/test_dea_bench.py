@@ -80,6 +80,31 @@ def test_nmpc_beats_pid_without_failures_on_a_short_run():
     assert nmpc.metrics["rmse"] < 0.2 * pid.metrics["rmse"]
 
 
+def test_multistart_keeps_the_lower_cost_plan_of_the_two_starts():
+    """``nmpc.multistart``: each sample solves from the shifted plan and from the inverse
+    model's inputs and sends the first input of the plan with the lower cost; it needs gn."""
+    config = BENCH.configure(["nmpc.multistart=true", "nmpc.r_rate=0.01"])
+    prepared = BENCH.prepare("single-sine", "nmpc", config)
+    controller, problem = prepared.controller, prepared.controller.problem
+    solve, pairs = problem.solve, []
+
+    def recording_solve(*args, **kwargs):
+        solution = solve(*args, **kwargs)
+        pairs.append(solution)
+        return solution
+    problem.solve = recording_solve
+    run = BENCH.run("single-sine", "nmpc", config, duration=1.0, prepared=prepared)
+    assert run.solver["failures"] == 0 and 0 < run.solver["inverse_starts_kept"] < len(run.input)
+    # the first sample starts from the inverse (no plan yet): one solve; then two per sample
+    assert len(pairs) == 2 * len(run.input) - 1
+    for k in range(1, len(run.input)):
+        shifted, inverse = pairs[2 * k - 1], pairs[2 * k]
+        best = inverse if inverse.cost < shifted.cost else shifted
+        assert run.input[k] == controller.bounds.clip(float(best.u_plan[0, 0]), float(run.input[k - 1]))
+    with pytest.raises(ValueError, match="nmpc.multistart compares the costs that solver gn reports.*'rti-c'"):
+        BENCH.build_controller("nmpc", BENCH.configure(["nmpc.multistart=true", "nmpc.solver=rti-c"]))
+
+
 def test_window_changes_only_the_controllers_memory():
     config = BENCH.configure()
     from hystmpc.experiments.config import apply_overrides
