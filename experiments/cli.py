@@ -331,6 +331,14 @@ def _sets(overrides: list[str], key: str) -> bool:
     return any(item.split("=", 1)[0].strip() == key for item in overrides or ())
 
 
+def _check_codegen_settings(bench: Bench, config) -> None:
+    from hystmpc.experiments.realtime import check_codegen_settings
+    try:
+        check_codegen_settings(bench, config)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
 def _codegen(args) -> int:
     from hystmpc.experiments.realtime import codegen
     bench = _bench(args.bench)
@@ -344,6 +352,7 @@ def _codegen(args) -> int:
     if args.target not in (None, *CODEGEN_TARGETS):
         raise UsageError(f"--target {args.target!r} is unknown; allowed: {', '.join(CODEGEN_TARGETS)}")
     config = _work_config(bench, args.overrides, args.force)
+    _check_codegen_settings(bench, config)
     if args.target is not None and not _sets(args.overrides, "solver.rti.sensitivity_block"):
         from hystmpc.experiments.firmware import firmware_config
         try:
@@ -397,6 +406,7 @@ def _speed(args) -> int:
     bench = _bench(args.bench)
     _positive_duration(args.duration)
     config = _work_config(bench, args.overrides, args.force)
+    _check_codegen_settings(bench, config)
     if args.variants:
         variants = args.variants.split(",")
         _check_names("solver variant", variants, SOLVERS)
@@ -506,6 +516,11 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
     if args.reference is not None and len(scenario_names) > 1:
         raise UsageError("--reference replaces one scenario's reference: name one scenario at most")
     config = _work_config(bench, args.overrides, args.force)
+    if "nmpc" in controllers and "nmpc" in config:
+        try:
+            config["nmpc"].check_combination()  # before any run, not after the first scenario's baselines
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
     if args.reference is not None and not scenario_names:
         scenarios = [_scenario(bench, None, args.reference)]
     else:

@@ -74,6 +74,7 @@ typedef struct {{
   casadi_real* res[{NAME}_SZ_RES];
   casadi_int iw[{NAME}_SZ_IW];
   casadi_real w[{NAME}_SZ_W];
+  casadi_real predicted;            /* read through {name}_predicted_output */
   int prepared;
   int solver_memory;
 }} {name}_controller;
@@ -97,6 +98,10 @@ void {name}_prepare({name}_controller* ctrl);
 long {name}_failures(const {name}_controller* ctrl);
 long {name}_estimator_resets(const {name}_controller* ctrl);
 
+/* The model's prediction of the last measured output before it came in ({units}; 0 before
+   the first step): the one-step prediction error is y_measured[0] minus this. */
+casadi_real {name}_predicted_output(const {name}_controller* ctrl);
+
 /* sizeof({name}_controller), for callers that allocate it themselves (Python's ctypes). */
 unsigned long {name}_controller_size(void);
 #endif
@@ -115,6 +120,7 @@ static const casadi_real {name}_initial_memory[{NAME}_MEM] = {{{initial}}};
 
 void {name}_init({name}_controller* ctrl) {{
   copy(ctrl->mem, {name}_initial_memory);
+  ctrl->predicted = 0;
   ctrl->prepared = 1;  /* nothing to predict before the first measurement */
   {name}_nmpc_feedback_incref();
   {name}_nmpc_prepare_incref();
@@ -132,7 +138,7 @@ void {name}_prepare({name}_controller* ctrl) {{
 
 int {name}_step({name}_controller* ctrl, const casadi_real* y_measured, const casadi_real* ref_preview,
                 casadi_real* u_out) {{
-  casadi_real status = {NAME}_FALLBACK, predicted;
+  casadi_real status = {NAME}_FALLBACK;
   if (!ctrl->prepared) {name}_prepare(ctrl);
   ctrl->arg[0] = ctrl->mem;
   ctrl->arg[1] = y_measured;
@@ -140,7 +146,7 @@ int {name}_step({name}_controller* ctrl, const casadi_real* y_measured, const ca
   ctrl->res[0] = ctrl->next;
   ctrl->res[1] = u_out;
   ctrl->res[2] = &status;
-  ctrl->res[3] = &predicted;
+  ctrl->res[3] = &ctrl->predicted;
   if ({name}_nmpc_feedback(ctrl->arg, ctrl->res, ctrl->iw, ctrl->w, ctrl->solver_memory)) {{
     /* not expected (a second controller instance, see above): hold the last input, memory unchanged */
     casadi_real u = ctrl->mem[{u_last}];
@@ -154,6 +160,7 @@ int {name}_step({name}_controller* ctrl, const casadi_real* y_measured, const ca
 
 long {name}_failures(const {name}_controller* ctrl) {{ return (long)ctrl->mem[{failures}]; }}
 long {name}_estimator_resets(const {name}_controller* ctrl) {{ return (long)ctrl->mem[{resets}]; }}
+casadi_real {name}_predicted_output(const {name}_controller* ctrl) {{ return ctrl->predicted; }}
 unsigned long {name}_controller_size(void) {{ return (unsigned long)sizeof({name}_controller); }}
 """
 
@@ -260,6 +267,9 @@ def controller_config(bench: Bench, config: dict) -> dict:
     and the controller run in Python (it is the one generated)."""
     if "nmpc" not in config:
         raise ValueError(f"bench {bench.name!r} has no nmpc settings")
+    if config["nmpc"].multistart:
+        raise ValueError("nmpc.multistart=true: the generated controller has no second start (its solver is the RTI "
+                         "step); set nmpc.multistart=false")
     return {**config, "nmpc": replace(config["nmpc"], solver="rti", runtime="python")}
 
 
@@ -429,6 +439,9 @@ class CompiledController:
         self._resets = self._lib[f"{name}_estimator_resets"]
         self._resets.restype = ctypes.c_long
         self._resets.argtypes = [ctypes.c_void_p]
+        self._predicted = self._lib[f"{name}_predicted_output"]
+        self._predicted.restype = ctypes.c_double
+        self._predicted.argtypes = [ctypes.c_void_p]
         self._z = (ctypes.c_double * len(self.sensor_names))()
         self._refs = (ctypes.c_double * (self.horizon + 1))()
         self._u = ctypes.c_double()
@@ -455,6 +468,11 @@ class CompiledController:
         self.statuses[status] = self.statuses.get(status, 0) + 1
         return u.value
 
+    @property
+    def predicted_output(self) -> float:
+        """``<name>_predicted_output``: the model's prediction of the last measured output."""
+        return float(self._predicted(self._ctrl))
+
     def stats(self) -> dict:
         """Failures and estimator restarts counted in C (each failure a fallback) and the
         statuses seen (no iteration counts: the RTI steps per sample are fixed)."""
@@ -476,6 +494,10 @@ def runs_generated(config: dict) -> bool:
     return runtime == "c" or (runtime == "auto" and settings.solver in RTI_SOLVERS)
 
 
+def _no_compiler() -> str:
+    return f"CC={os.environ['CC']!r} is not an executable" if os.environ.get("CC") else "no cc on the PATH"
+
+
 def check_runtime(config: dict) -> None:
     """``ValueError`` when ``nmpc.runtime=c`` cannot run: a solver the generated controller
     does not have, or no C compiler. Cheap: no code is generated."""
@@ -487,8 +509,7 @@ def check_runtime(config: dict) -> None:
                          f"{settings.solver!r} (allowed with it: {', '.join(RTI_SOLVERS)}; or set nmpc.runtime=python "
                          "or auto)")
     if c_compiler() is None:
-        where = f"CC={os.environ['CC']!r} is not an executable" if os.environ.get("CC") else "no cc on the PATH"
-        raise ValueError(f"nmpc.runtime=c needs a C compiler ({where}); set nmpc.runtime=python or auto")
+        raise ValueError(f"nmpc.runtime=c needs a C compiler ({_no_compiler()}); set nmpc.runtime=python or auto")
 
 
 STALE_BUILD_S = 3600.0
@@ -513,10 +534,13 @@ def compiled_controller(bench: Bench, config: dict):
     from hystmpc.mpc.rti import LOG, cache_dir
     check_runtime(config)
     cc = c_compiler()
-    python = bench.build_controller("nmpc", controller_config(bench, config))
+
+    def in_python():  # runtime=auto where the C controller cannot run: the user's solver, in Python
+        return bench.build_controller("nmpc", {**config, "nmpc": replace(config["nmpc"], runtime="python")})
     if cc is None:  # runtime=auto: check_runtime refuses runtime=c without a compiler
-        LOG.warning("no C compiler (cc, or CC) on the PATH: nmpc.runtime=auto runs the controller in Python, slower")
-        return python
+        LOG.warning(f"no C compiler ({_no_compiler()}): nmpc.runtime=auto runs the controller in Python, slower")
+        return in_python()
+    python = bench.build_controller("nmpc", controller_config(bench, config))
     name = "controller"
     root = cache_dir() / "controllers"
     with tempfile.TemporaryDirectory(prefix="hystmpc-controller-") as scratch:  # a cache hit writes nothing there
@@ -526,7 +550,7 @@ def compiled_controller(bench: Bench, config: dict):
         except NotGeneratable as exc:
             if config["nmpc"].runtime == "auto":
                 LOG.warning(f"{exc}: nmpc.runtime=auto runs the controller in Python")
-                return python
+                return in_python()
             raise ValueError(f"nmpc.runtime=c: {exc}; or set nmpc.runtime=python or auto") from None
         include, libraries = library_flags((written / f"{name}_nmpc.c").read_text())
         digest = hashlib.sha256(" ".join([*cc, *COMPILE_FLAGS, *include, *libraries]).encode())
@@ -536,7 +560,7 @@ def compiled_controller(bench: Bench, config: dict):
         if (folder / f"lib{name}.so").exists():
             return CompiledController(folder / f"lib{name}.so", name, python)
         LOG.info(f"building the generated controller ({sum(p.stat().st_size for p in written.iterdir()) // 1000} kB "
-                 f"of C) for nmpc.runtime=c; once, cached in {root}")
+                 f"of C) for nmpc.runtime={config['nmpc'].runtime}; once, cached in {root}")
         _build(written, name, include, libraries, example=False)
         root.mkdir(parents=True, exist_ok=True)
         for stale in root.glob("building-*"):  # left by a killed build

@@ -126,14 +126,23 @@ def _problem_of(controller):
     return problem
 
 
-def _rti_config(bench: Bench, config: dict, solver: str) -> dict:
+def check_codegen_settings(bench: Bench, config: dict) -> None:
+    """``ValueError`` for NMPC settings that ``codegen`` and ``speed`` do not read: a runtime
+    other than the bench's default, and ``multistart`` (cheap: checked before any work)."""
     if "nmpc" not in config:
         raise ValueError(f"bench {bench.name!r} has no nmpc settings")
-    runtime = config["nmpc"].runtime
-    if runtime != bench.configure()["nmpc"].runtime:  # the bench's default says nothing here
+    runtime, default = config["nmpc"].runtime, bench.configure()["nmpc"].runtime
+    if runtime != default:  # the bench's default says nothing here
         raise ValueError(f"nmpc.runtime={runtime} chooses where run, compare and sweep run the controller; "
                          "codegen writes the generated controller and speed times the solver variants whatever "
-                         "it says: drop the setting here")
+                         f"it says: drop the setting here (this bench's default: {default})")
+    if config["nmpc"].multistart:
+        raise ValueError("nmpc.multistart=true is the Python gn solver's second start; the generated controller and "
+                         "the solver variants that speed times have none: drop the setting here")
+
+
+def _rti_config(bench: Bench, config: dict, solver: str) -> dict:
+    check_codegen_settings(bench, config)
     return {**config, "nmpc": replace(config["nmpc"], solver=solver, runtime="python")}
 
 

@@ -104,11 +104,10 @@ class NmpcController:
                       "the model's Dynamics give no steady_input (the hysteresis output that holds an output at rest)")
             raise ValueError(f"no default inverse model for the warm start and r_input: {reason}; give inverse=..., "
                              "or use nmpc.warm_start=shift with nmpc.r_input=0")
-        if settings.multistart and (settings.solver != "gn" or inverse is None):
-            raise ValueError(f"nmpc.multistart compares the costs that solver gn reports, from the shifted plan and "
-                             f"from the inverse model's inputs; nmpc.solver is {settings.solver!r}"
-                             + ("" if inverse is not None else " and there is no inverse model")
-                             + " (allowed with it: gn)")
+        settings.check_combination()
+        if settings.multistart and inverse is None:
+            raise ValueError("nmpc.multistart also solves from the inverse model's inputs, and this model has none: "
+                             "give inverse=..., or set nmpc.multistart=false")
         self.inverse = inverse
         self.jump_threshold = float(jump_threshold)
         self.reset()
@@ -183,9 +182,10 @@ class NmpcController:
         else:
             u_guess, x_guess = self._initial_guess(u_inv, jump, est)
             u_ff = u_inv() if self.settings.r_input > 0 else np.zeros(N)  # zero weight: value unused
+            from_inverse = (self._plan is None or jump) and self.settings.warm_start == "inverse"
             condition = self.observer.condition(est)
             result = self.problem.solve(condition, self._u_last, refs, u_guess, x_guess, u_ff=u_ff)
-            if self.settings.multistart and self._plan is not None and not jump:  # else u_guess was the inverse
+            if self.settings.multistart and not from_inverse:
                 other = self.problem.solve(condition, self._u_last, refs, u_inv(), None, u_ff=u_ff)
                 if other.success and (not result.success or other.cost < result.cost):
                     self.inverse_starts_kept += 1

@@ -56,17 +56,18 @@ class NmpcSettings:
     """Initial guess at start-up, after a reference jump and after a failure: 'inverse',
     'shift' (previous plan only, the last input at start) or 'cold' (zeros every step)."""
     multistart: bool = False
-    """Each sample, also solve from the inverse model's inputs and keep the plan with the
-    lower cost. Across a hysteresis loop the tracking problem has several local minima, and
-    the shifted plan can sit in the worse one (dea: RMSE 0.0034 -> 0.0013 mm on single-sine
-    with ``r_rate`` 0.01, at twice the solves). Needs solver ``gn`` and an inverse model."""
+    """Each sample, also solve from the inverse model's inputs (unless that was the start)
+    and keep the plan with the lower cost. Across a hysteresis loop the tracking problem has
+    several local minima, and the shifted plan can sit in the worse one (dea: RMSE 0.0034 ->
+    0.0013 mm on single-sine with ``r_rate`` 0.01, at twice the solves; the iteration counts
+    then add up both). Needs solver ``gn`` and an inverse model."""
     runtime: str = "python"
     """Where the controller runs in closed loop: ``python``; ``c``: the whole generated
     controller that ``hystmpc codegen`` writes (estimator, warm start, RTI steps,
     fallback), compiled once, cached, and called through ctypes; the same inputs, timed as
-    a rig runs it, but no predicted output in the results (needs solver ``rti`` or ``rti-c``
+    a rig runs it, but no iteration counts in the results (needs solver ``rti`` or ``rti-c``
     and a C compiler); ``auto``: ``c`` with an RTI solver, else ``python`` (after a notice
-    when only the C compiler is missing)."""
+    when the C compiler is missing or the controller cannot be generated)."""
 
     def __post_init__(self):
         if self.horizon < 2:
@@ -79,6 +80,13 @@ class NmpcSettings:
             raise ValueError(f"warm_start {self.warm_start!r} is unknown; allowed: {', '.join(WARM_STARTS)}")
         _check_finite(self, ("r_rate", "r_input"))
         _check_finite(self, ("q_output",), strict=True)
+
+    def check_combination(self) -> None:
+        """``ValueError`` for settings that cannot go together (checked when the controller is
+        built, and before any work by the command line, after all ``--set``)."""
+        if self.multistart and self.solver != "gn":
+            raise ValueError(f"nmpc.multistart compares the costs that solver gn reports, from the shifted plan and "
+                             f"from the inverse model's inputs; nmpc.solver is {self.solver!r} (allowed with it: gn)")
 
 
 @dataclass(frozen=True)

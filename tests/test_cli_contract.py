@@ -81,6 +81,12 @@ CASES = [
     (["run", "pam", "square-20", "--controller", "nmpc", "--set", "nmpc.multistart=true", "--no-plots", "--duration",
       "0.1"], 2, "nmpc.multistart compares the costs that solver gn reports, from the shifted plan and from the "
      "inverse model's inputs; nmpc.solver is 'rti-c' (allowed with it: gn)"),
+    (["codegen", "reluctance", "--set", "nmpc.runtime=python", "--out", "{tmp}/cg"], 2, "drop the setting here "
+     "(this bench's default: auto)"),
+    (["codegen", "dea", "--set", "nmpc.multistart=true", "--out", "{tmp}/cg"], 2, "nmpc.multistart=true is the "
+     "Python gn solver's second start"),
+    (["compare", "pam", "--set", "nmpc.multistart=true", "--no-plots", "--out", "{tmp}/cmp"], 2,
+     "nmpc.multistart compares the costs that solver gn reports"),
     (["speed", "reluctance", "--set", "nmpc.runtime=python"], 2, "nmpc.runtime=python chooses where run, compare and "
      "sweep run the controller; codegen writes the generated controller and speed times the solver variants"),
     # output paths, checked before any work

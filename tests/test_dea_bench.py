@@ -88,8 +88,12 @@ def test_multistart_keeps_the_lower_cost_plan_of_the_two_starts():
     controller, problem = prepared.controller, prepared.controller.problem
     solve, pairs = problem.solve, []
 
-    def recording_solve(*args, **kwargs):
-        solution = solve(*args, **kwargs)
+    def recording_solve(condition, u_prev, ref, u_guess, x_guess=None, u_ff=None):
+        solution = solve(condition, u_prev, ref, u_guess, x_guess, u_ff=u_ff)
+        if len(pairs) < 20:  # the cost it reports is the cost at its plan
+            residual = np.asarray(problem._gn_eval(solution.u_plan.ravel(),
+                                                   problem._parameters(condition, u_prev, ref, u_ff))[0]).ravel()
+            assert solution.cost == pytest.approx(float(residual @ residual), rel=1e-12)
         pairs.append(solution)
         return solution
     problem.solve = recording_solve
@@ -103,6 +107,13 @@ def test_multistart_keeps_the_lower_cost_plan_of_the_two_starts():
         assert run.input[k] == controller.bounds.clip(float(best.u_plan[0, 0]), float(run.input[k - 1]))
     with pytest.raises(ValueError, match="nmpc.multistart compares the costs that solver gn reports.*'rti-c'"):
         BENCH.build_controller("nmpc", BENCH.configure(["nmpc.multistart=true", "nmpc.solver=rti-c"]))
+    # a shifted start from the first sample on: the inverse start runs every sample
+    shift = BENCH.configure(["nmpc.multistart=true", "nmpc.warm_start=shift"])
+    prepared = BENCH.prepare("single-sine", "nmpc", shift)
+    solve, calls = prepared.controller.problem.solve, []
+    prepared.controller.problem.solve = lambda *a, **k: calls.append(1) or solve(*a, **k)
+    run = BENCH.run("single-sine", "nmpc", shift, duration=0.2, prepared=prepared)
+    assert len(calls) == 2 * len(run.input)
 
 
 def test_window_changes_only_the_controllers_memory():

@@ -273,6 +273,7 @@ def test_runtime_c_runs_the_generated_controller_with_the_python_controllers_inp
     config = bench.configure(["nmpc.runtime=c"])
     generated = bench.run("square-20", "nmpc", config, duration=2.0)
     assert np.array_equal(python.input, generated.input)
+    assert np.array_equal(python.predicted, generated.predicted)  # the model's one-step prediction, as well
     assert generated.solver["name"] == "generated C" and generated.solver["fallbacks"] == 0
     again = bench.build_controller("nmpc", config)  # from the cache: a second instance runs as well
     assert np.array_equal(bench.run("square-20", "nmpc", config, duration=2.0,
@@ -303,3 +304,10 @@ def test_runtime_auto_runs_the_generated_controller_where_it_can(tmp_path, monke
     assert "nmpc.runtime=auto runs the controller in Python" in caplog.text
     with pytest.raises(ValueError, match="nmpc.runtime=c needs a C compiler"):
         bench.build_controller("nmpc", bench.configure(["nmpc.runtime=c"]))
+    monkeypatch.delenv("CC")
+    dea = get_bench("dea")  # the whole creep memory cannot be generated: the user's solver, in Python
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="hystmpc"):
+        whole_memory = dea.build_controller("nmpc", dea.configure(["nmpc.runtime=auto", "nmpc.solver=rti-c"]))
+    assert type(whole_memory).__name__ == "NmpcController" and whole_memory.settings.solver == "rti-c"
+    assert "nmpc.runtime=auto runs the controller in Python" in caplog.text
