@@ -30,6 +30,49 @@ GN_COMPILE_FLAGS = ("-O1", "-ffp-contract=off")
 -O1 compiles in 7 s and runs at 71 µs per call from Python, -O0 in 2.6 s at 173 µs."""
 
 
+class BufferedEvaluation:
+    """A CasADi Function called through its zero-copy buffers, on dense NumPy values: the
+    same numbers as a call, without its conversions (on dea's Gauss–Newton evaluation and QP
+    they cost more than the compiled evaluation itself)."""
+
+    def __init__(self, fun: ca.Function):
+        def layout(shape, sparsity):
+            return shape, *(np.asarray(v, int) for v in sparsity.get_triplet())
+        self._names = [fun.name_in(i) for i in range(fun.n_in())]
+        self._defaults = [fun.default_in(i) for i in range(fun.n_in())]
+        self._inputs = [np.zeros(fun.nnz_in(i)) for i in range(fun.n_in())]
+        self._outputs = [np.zeros(fun.nnz_out(i)) for i in range(fun.n_out())]
+        self._in_layout = [layout(fun.size_in(i), fun.sparsity_in(i)) for i in range(fun.n_in())]
+        self._out_layout = [layout(fun.size_out(i), fun.sparsity_out(i)) for i in range(fun.n_out())]
+        self._buffer, self._evaluate = fun.buffer()
+        for i, a in enumerate(self._inputs):
+            self._buffer.set_arg(i, memoryview(a))
+        for i, a in enumerate(self._outputs):
+            self._buffer.set_res(i, memoryview(a))
+
+    def __call__(self, *args, **named) -> list[np.ndarray]:
+        """The outputs as new dense arrays (column vectors as 1-D); inputs by position or
+        name, dense, the ones not given at the Function's defaults."""
+        if len(args) > len(self._names):
+            raise ValueError(f"{len(args)} arguments for a Function of {len(self._names)} inputs")
+        values = dict(zip(self._names, args, strict=False))  # the ones after the last given: defaults
+        values.update(named)
+        for name, target, default, (shape, rows, cols) in zip(self._names, self._inputs, self._defaults,
+                                                               self._in_layout, strict=True):
+            value = values.get(name)
+            if value is None:
+                target.fill(default)
+            else:
+                target[:] = np.reshape(np.asarray(value, float), shape, order="F")[rows, cols]
+        self._evaluate()
+        outputs = []
+        for values_nz, (shape, rows, cols) in zip(self._outputs, self._out_layout, strict=True):
+            dense = np.zeros(shape)
+            dense[rows, cols] = values_nz
+            outputs.append(dense[:, 0] if shape[1] == 1 else dense)
+        return outputs
+
+
 class SingleShootingProblem(TrackingProblem):
     """Minimise Σ q (y_k − r_k)² + r_rate Δu² + r_input (u − u_ff)² over the inputs only.
 
@@ -124,11 +167,13 @@ class SingleShootingProblem(TrackingProblem):
         except RuntimeError as exc:  # no compiler, or one that fails: gn still works, slower
             LOG.warning(f"{str(exc)[:300]}: solver gn evaluates its residual and Jacobian in-process, slower")
             self._gn_eval = evaluate
+        self._gn_buffered = BufferedEvaluation(self._gn_eval)
         H = ca.Sparsity.dense(N, N)
         A = ca.DM(np.eye(N) - np.eye(N, k=-1)) if self._rate_bounded else ca.DM(0, N)
         self._A = np.asarray(A)
         self._qp = ca.conic("gn_qp", "qrqp", {"h": H, "a": ca.DM(A).sparsity()},
                             {"print_iter": False, "print_header": False, "error_on_fail": False})
+        self._qp_buffered = BufferedEvaluation(self._qp)
 
     def _build_rti(self, U, params, residual, du) -> None:
         """One Gauss–Newton step per sample as one Function (``rti``), compiled for ``rti-c``."""
@@ -157,8 +202,7 @@ class SingleShootingProblem(TrackingProblem):
         (u, ok, status, iters, cost at u)."""
         gn, N = self.solvers.gn, self.horizon
         u_prev = p[self.n_condition]
-        res, J = (np.asarray(v) for v in self._gn_eval(u, p))
-        res = res.ravel()
+        res, J = self._gn_buffered(u, p)
         cost = float(res @ res)
         if not np.isfinite(cost):
             return u, False, "Non_Finite_Cost", 0, cost
@@ -169,15 +213,14 @@ class SingleShootingProblem(TrackingProblem):
             if self._rate_bounded:
                 du = u - np.concatenate(([u_prev], u[:-1]))
                 args.update(a=self._A, lba=self._bounds["lbg"] - du, uba=self._bounds["ubg"] - du)
-            sol = self._qp(**args)
-            step = np.asarray(sol["x"]).ravel()
+            step = self._qp_buffered(**args)[0]
             if not np.all(np.isfinite(step)):
                 return u, False, "QP_Failed", it, cost
             t = 1.0
             while t > 1e-3:
                 trial = u + t * step
-                res_t, J_t = (np.asarray(v) for v in self._gn_eval(trial, p))
-                cost_t = float(res_t.ravel() @ res_t.ravel())
+                res_t, J_t = self._gn_buffered(trial, p)
+                cost_t = float(res_t @ res_t)
                 if cost_t <= cost:
                     break
                 t *= 0.5
@@ -185,7 +228,7 @@ class SingleShootingProblem(TrackingProblem):
                 finite = np.isfinite(cost_t)
                 return u, bool(finite), "Solve_Succeeded" if finite else "Non_Finite_Cost", it, cost
             stalled = cost - cost_t < gn.ftol * cost
-            u, res, J, cost = trial, res_t.ravel(), J_t, cost_t
+            u, res, J, cost = trial, res_t, J_t, cost_t
             if np.max(np.abs(t * step)) <= gn.tol * (1.0 + np.max(np.abs(u))) or stalled:
                 return u, True, "Solve_Succeeded", it, cost
         return u, False, "Maximum_Iterations_Exceeded", gn.max_iter, cost

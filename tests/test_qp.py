@@ -167,3 +167,27 @@ def test_rti_settings_refuse_what_the_step_would_not_use():
         RtiSettings(qp="ipm").check_step(condensed=False)
     with pytest.raises(ValueError, match="qp must be one of daqp, ipm"):
         RtiSettings(qp="qrqp")
+
+
+def test_buffered_evaluation_gives_a_calls_numbers():
+    """``BufferedEvaluation``: dense NumPy in and out through CasADi's buffers, the same
+    numbers as a call; inputs not given take the Function's defaults (a QP's infinite
+    bounds), sparse inputs and outputs are scattered by their sparsity."""
+    from hystmpc.mpc.single_shooting import BufferedEvaluation
+    x, p = ca.SX.sym("x", 4), ca.SX.sym("p", 3)
+    r = ca.vertcat(ca.sin(x[:3]) * p, x[1:] - x[:-1], x[0] * x[3])
+    fun = ca.Function("f", [x, p], [r, ca.jacobian(r, x)])  # a sparse Jacobian
+    rng = np.random.default_rng(1)
+    u, q = rng.normal(size=4), rng.normal(size=3)
+    res, jac = BufferedEvaluation(fun)(u, q)
+    assert np.array_equal(res, np.asarray(fun(u, q)[0]).ravel())
+    assert np.array_equal(jac, np.asarray(fun(u, q)[1]))
+    A = np.eye(4) - np.eye(4, k=-1)
+    qp = ca.conic("q", "qrqp", {"h": ca.Sparsity.dense(4, 4), "a": ca.DM(A).sparsity()},
+                  {"print_iter": False, "print_header": False, "error_on_fail": False})
+    H, g = np.diag([1.0, 2.0, 3.0, 4.0]) + 0.1, rng.normal(size=4)
+    args = {"h": H, "g": g, "a": A, "lba": -0.1 * np.ones(4), "uba": 0.1 * np.ones(4), "ubx": np.ones(4)}
+    expected = qp(**args)
+    step, cost, _, _ = BufferedEvaluation(qp)(**args)
+    assert np.array_equal(step, np.asarray(expected["x"]).ravel()) and cost == float(expected["cost"])
+    assert step.min() < 0 < step.max() <= 1  # lbx took its default, -inf; ubx the value given
