@@ -109,6 +109,12 @@ class NmpcController:
             raise ValueError("nmpc.multistart also solves from the inverse model's inputs, and this model has none: "
                              "give inverse=..., or set nmpc.multistart=false")
         self.inverse = inverse
+        prepare = getattr(inverse, "prepare", None)
+        if prepare is not None:  # its Function built and compiled now, not inside the first sample
+            try:
+                prepare(self.observer.estimate(settings.horizon), settings.horizon)
+            except Exception:  # noqa: BLE001 - an observer with no estimate yet: built at the first sample
+                pass
         self.jump_threshold = float(jump_threshold)
         self.reset()
 

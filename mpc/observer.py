@@ -254,7 +254,7 @@ def _compiled_or_not(fun: ca.Function) -> ca.Function:
     from hystmpc.mpc.rti import LOG, compile_function
     try:
         return compile_function(fun)
-    except RuntimeError as exc:  # no compiler, or one that fails
+    except (RuntimeError, OSError) as exc:  # no compiler, one that fails, or a cache it cannot write
         LOG.warning(f"{str(exc)[:300]}: the inverse model runs in-process, slower")
         return fun
 
@@ -359,4 +359,5 @@ def memory_inverse(memory: InputMemory, sample_period: float) -> Callable[[Estim
             out.append(u)
         return ca.vertcat(*out)
     inverse.hysteresis = hysteresis  # whose inverse_step it runs (named when it has no CasADi form)
+    inverse.prepare = as_function  # build (and compile) ahead of the first sample: (estimate, n) -> Function
     return inverse

@@ -55,6 +55,9 @@ class BufferedEvaluation:
         name, dense, the ones not given at the Function's defaults."""
         if len(args) > len(self._names):
             raise ValueError(f"{len(args)} arguments for a Function of {len(self._names)} inputs")
+        unknown = set(named) - set(self._names)
+        if unknown:
+            raise ValueError(f"unknown input(s) {sorted(unknown)}; allowed: {', '.join(self._names)}")
         values = dict(zip(self._names, args, strict=False))  # the ones after the last given: defaults
         values.update(named)
         for name, target, default, (shape, rows, cols) in zip(self._names, self._inputs, self._defaults,
@@ -62,8 +65,12 @@ class BufferedEvaluation:
             value = values.get(name)
             if value is None:
                 target.fill(default)
-            else:
-                target[:] = np.reshape(np.asarray(value, float), shape, order="F")[rows, cols]
+                continue
+            value = np.asarray(value, float)
+            vector = 1 in shape or value.ndim < 2
+            if value.size != shape[0] * shape[1] or not (vector or value.shape == tuple(shape)):
+                raise ValueError(f"input {name} needs shape {tuple(shape)}, got {value.shape}")
+            target[:] = np.reshape(value, shape, order="F")[rows, cols]
         self._evaluate()
         outputs = []
         for values_nz, (shape, rows, cols) in zip(self._outputs, self._out_layout, strict=True):
@@ -164,7 +171,7 @@ class SingleShootingProblem(TrackingProblem):
         evaluate = ca.Function("gn_eval", [U, params], [residual, ca.jacobian(residual, U)])
         try:  # compiled: the same numbers to the last bit, a fifth of the time (dea: 71 against 342 µs per call)
             self._gn_eval = compile_function(evaluate, flags=GN_COMPILE_FLAGS)
-        except RuntimeError as exc:  # no compiler, or one that fails: gn still works, slower
+        except (RuntimeError, OSError) as exc:  # no compiler, one that fails, or an unwritable cache: slower
             LOG.warning(f"{str(exc)[:300]}: solver gn evaluates its residual and Jacobian in-process, slower")
             self._gn_eval = evaluate
         self._gn_buffered = BufferedEvaluation(self._gn_eval)

@@ -191,3 +191,7 @@ def test_buffered_evaluation_gives_a_calls_numbers():
     step, cost, _, _ = BufferedEvaluation(qp)(**args)
     assert np.array_equal(step, np.asarray(expected["x"]).ravel()) and cost == float(expected["cost"])
     assert step.min() < 0 < step.max() <= 1  # lbx took its default, -inf; ubx the value given
+    with pytest.raises(ValueError, match="unknown input"):
+        BufferedEvaluation(qp)(hh=H)
+    with pytest.raises(ValueError, match=r"input h needs shape \(4, 4\), got \(2, 8\)"):
+        BufferedEvaluation(qp)(h=np.ones((2, 8)))
