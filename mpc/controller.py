@@ -186,9 +186,10 @@ class NmpcController:
             result = Solution(u_plan=np.full((N, 1), np.nan), x_plan=None, success=False,
                               status="Non_Finite_Estimate", iterations=0, solve_time=0.0)
         else:
+            reinitialised = self.reinitialisations
             u_guess, x_guess = self._initial_guess(u_inv, jump, est)
+            from_inverse = self.reinitialisations > reinitialised  # this sample already starts from the inverse
             u_ff = u_inv() if self.settings.r_input > 0 else np.zeros(N)  # zero weight: value unused
-            from_inverse = (self._plan is None or jump) and self.settings.warm_start == "inverse"
             condition = self.observer.condition(est)
             result = self.problem.solve(condition, self._u_last, refs, u_guess, x_guess, u_ff=u_ff)
             if self.settings.multistart and not from_inverse:
