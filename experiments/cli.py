@@ -518,7 +518,7 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
     config = _work_config(bench, args.overrides, args.force)
     if "nmpc" in controllers and "nmpc" in config:
         try:
-            config["nmpc"].check_combination()  # before any run, not after the first scenario's baselines
+            config["nmpc"].check_combination(config.get("solver"))  # before any baseline runs  # before any run
         except ValueError as exc:
             raise UsageError(str(exc)) from None
     if args.reference is not None and not scenario_names:

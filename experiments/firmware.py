@@ -267,9 +267,6 @@ def controller_config(bench: Bench, config: dict) -> dict:
     and the controller run in Python (it is the one generated)."""
     if "nmpc" not in config:
         raise ValueError(f"bench {bench.name!r} has no nmpc settings")
-    if config["nmpc"].multistart:
-        raise ValueError("nmpc.multistart=true: the generated controller has no second start (its solver is the RTI "
-                         "step); set nmpc.multistart=false")
     return {**config, "nmpc": replace(config["nmpc"], solver="rti", runtime="python")}
 
 

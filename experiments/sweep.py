@@ -209,7 +209,7 @@ def load_spec(path: str | Path, extra_overrides: Iterable[str] = (), duration: f
         if "nmpc" in controllers:
             from hystmpc.experiments.firmware import check_runtime
             check_runtime(config)
-            config["nmpc"].check_combination()
+            config["nmpc"].check_combination(config.get("solver"))
         check_sweep(spec.n_runs, sum(per_scenario.values()) * spec.n_runs // len(scenarios), force)
     except ValueError as exc:
         _fail(path, str(exc))

@@ -83,6 +83,7 @@ class NmpcController:
                  observer=None, inverse: Inverse | None = None, sensor_noise=None,
                  jump_threshold: float = np.inf, creep_window: int | None = None):
         settings, solvers = settings or NmpcSettings(), solvers or SolverSettings()
+        settings.check_combination(solvers)  # before a solver is built (and compiled)
         self.model, self.bounds, self.settings, self.solvers = model, bounds, settings, solvers
         if isinstance(model, CreepPredictionModel):
             N = settings.horizon
@@ -104,7 +105,6 @@ class NmpcController:
                       "the model's Dynamics give no steady_input (the hysteresis output that holds an output at rest)")
             raise ValueError(f"no default inverse model for the warm start and r_input: {reason}; give inverse=..., "
                              "or use nmpc.warm_start=shift with nmpc.r_input=0")
-        settings.check_combination()
         if settings.multistart and inverse is None:
             raise ValueError("nmpc.multistart also solves from the inverse model's inputs, and this model has none: "
                              "give inverse=..., or set nmpc.multistart=false")

@@ -316,9 +316,9 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     shifted = ca.vertcat(plan[1:], plan[-1])
     # the inverse costs dea's controller a quarter of its step: computed only on the samples that use it
     restart = ca.logic_or(ca.logic_not(has_plan), jump)  # the inverse warm start's samples
-    needs_inverse = ca.MX(1) if s.r_input > 0 else restart if s.warm_start == "inverse" else ca.MX(0)
+    needs_inverse = ca.MX(1) if s.r_input > 0 or s.multistart else restart if s.warm_start == "inverse" else ca.MX(0)
     u_inv = None
-    if inverse_plan is not None and (s.r_input > 0 or s.warm_start == "inverse"):
+    if inverse_plan is not None and (s.r_input > 0 or s.warm_start == "inverse" or s.multistart):
         u_inv = inverse_plan(needs_inverse)
     if s.warm_start == "cold":
         u_guess = ca.DM.zeros(N)
@@ -327,16 +327,28 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     else:
         u_guess = ca.if_else(has_plan, shifted, ca.repmat(u_last, N, 1))
     u_ff = u_inv if s.r_input > 0 else ca.DM.zeros(N)
-    w = feasible_guess_expr(u_guess, u_last, u_min, u_max, rate)
     p = ca.vertcat(condition, u_last, refs, u_ff)
-    worst, broken = ca.MX(0), ca.MX(0)
-    for _ in range(controller.solvers.rti.iterations):
-        w_next, qp_error = problem.rti(w, p)
-        worst = ca.if_else(qp_error <= worst, worst, qp_error)  # as rti_steps: a NaN error replaces the worst
-        finite = _finite(w_next)
-        broken = ca.logic_or(broken, ca.logic_not(finite))
-        w = ca.if_else(finite, w_next, w)  # a non-finite step is a failure; the next QP gets finite data
-    success = ca.logic_and(ca.logic_and(ca.logic_not(lost), ca.logic_not(broken)), worst <= QP_TOLERANCE)
+
+    def rti_steps(guess):
+        """The RTI steps from ``guess`` made feasible: the last iterate, and whether they succeeded."""
+        w = feasible_guess_expr(guess, u_last, u_min, u_max, rate)
+        worst, broken = ca.MX(0), ca.MX(0)
+        for _ in range(controller.solvers.rti.iterations):
+            w_next, qp_error = problem.rti(w, p)
+            worst = ca.if_else(qp_error <= worst, worst, qp_error)  # as rti_steps: a NaN error replaces the worst
+            finite = _finite(w_next)
+            broken = ca.logic_or(broken, ca.logic_not(finite))
+            w = ca.if_else(finite, w_next, w)  # a non-finite step is a failure; the next QP gets finite data
+        return w, ca.logic_and(ca.logic_and(ca.logic_not(lost), ca.logic_not(broken)), worst <= QP_TOLERANCE)
+
+    w, success = rti_steps(u_guess)
+    if s.multistart:  # also from the inverse (the same start on a restart, so the first plan is kept)
+        if u_inv is None or problem.rti_cost is None:
+            raise NotGeneratable("nmpc.multistart needs an inverse model and a single-shooting RTI step (its cost)")
+        w_inv, success_inv = rti_steps(u_inv)
+        take = ca.logic_and(success_inv, ca.logic_or(ca.logic_not(success),
+                                                     problem.rti_cost(w_inv, p) < problem.rti_cost(w, p)))
+        w, success = ca.if_else(take, w_inv, w), ca.logic_or(take, success)
 
     planned = ca.if_else(success, w[0], plan[min(1, N - 1)])
     # the fallback when neither the step nor the last plan gives a finite input: never a NaN to the actuator

@@ -108,6 +108,7 @@ class MultipleShootingProblem(TrackingProblem):
         lower = np.concatenate((self.u_min * np.ones(N), -self.du_max * np.ones(n_rates)))
         upper = np.concatenate((self.u_max * np.ones(N), self.du_max * np.ones(n_rates)))
         linearise, cost = self._condensed_linearisation(p.numel(), n_rates)
+        self.rti_cost = cost
         rti = self.solvers.rti
         return gauss_newton_step(linearise, cost, lower, upper, step_lengths=(0.5, 0.25, 0.125), qp=rti.qp,
                                  qp_iterations=rti.qp_iterations, line_search=rti.line_search)

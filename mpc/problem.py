@@ -36,7 +36,7 @@ class Solution:
     solve_time: float
     """Wall-clock time of the solve (s)."""
     cost: float = float("nan")
-    """The objective at ``u_plan``, where the solver reports it (``gn``)."""
+    """The objective at ``u_plan``, where the solver reports it (``gn``; the single-shooting RTI step)."""
 
 
 def nlp_solver(name: str, nlp: dict, solver: str, settings: NlpSettings) -> ca.Function:
@@ -88,6 +88,9 @@ class TrackingProblem:
         self.u_min, self.u_max, self.du_max = float(bounds.lower), float(bounds.upper), float(bounds.rate)
         self.n_condition = n_condition
         self.rti: ca.Function | None = None
+        self.rti_cost: ca.Function | None = None
+        """``(w, p) -> Σ r²`` of the RTI step's problem, where it has one (single shooting, condensed
+        multiple shooting)."""
         self._solver: ca.Function | None = None
         self._lam = None
 
@@ -115,13 +118,16 @@ class TrackingProblem:
         iterations = self.solvers.rti.iterations
         start = time.perf_counter()
         w, qp_error = rti_steps(self.rti, w0, p, iterations)
-        elapsed = time.perf_counter() - start
         finite = bool(np.all(np.isfinite(w)))
+        cost = float("nan")
+        if self.settings.multistart and self.rti_cost is not None and finite:  # the cost picks between two plans
+            cost = float(self.rti_cost(w, p))
+        elapsed = time.perf_counter() - start
         ok = finite and qp_error <= QP_TOLERANCE
         u_plan, x_plan = finish(w, finite)
         status = "RTI_Step" if ok else ("RTI_Non_Finite" if not finite else "RTI_QP_Failed")
         return Solution(u_plan=u_plan, x_plan=x_plan, success=ok, status=status, iterations=iterations,
-                        solve_time=elapsed)
+                        solve_time=elapsed, cost=cost)
 
     def _solve_nlp(self, args: dict, warm: bool) -> tuple[np.ndarray, bool, str, int, float]:
         """One IPOPT/sqpmethod solve; returns the solution vector, success, status, iterations, time."""

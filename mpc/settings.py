@@ -19,6 +19,8 @@ problems condensed onto the inputs, with DAQP or the interior-point QP of :mod:`
 ``rti-c`` (the default), the same generated as C, compiled and loaded (in-process, with a
 notice, when there is no C compiler); ``gn``, Gauss–Newton SQP to convergence
 (single-shooting problems only)."""
+MULTISTART_SOLVERS = ("gn", "rti", "rti-c")
+"""Solver variants that report the cost ``nmpc.multistart`` compares."""
 WARM_STARTS = ("inverse", "shift", "cold")
 RUNTIMES = ("python", "c", "auto")
 """Where the NMPC runs in closed loop (``nmpc.runtime``)."""
@@ -60,7 +62,9 @@ class NmpcSettings:
     and keep the plan with the lower cost. Across a hysteresis loop the tracking problem has
     several local minima, and the shifted plan can sit in the worse one (dea: RMSE 0.0034 ->
     0.0013 mm on single-sine with ``r_rate`` 0.01, at twice the solves; the iteration counts
-    then add up both). Needs solver ``gn`` and an inverse model."""
+    then add up both). Needs an inverse model and solver ``gn``, ``rti`` or ``rti-c`` on
+    an input-driven model (single shooting: the problem whose cost they report); the
+    generated controller runs the RTI steps from both starts."""
     runtime: str = "python"
     """Where the controller runs in closed loop: ``python``; ``c``: the whole generated
     controller that ``hystmpc codegen`` writes (estimator, warm start, RTI steps,
@@ -81,12 +85,18 @@ class NmpcSettings:
         _check_finite(self, ("r_rate", "r_input"))
         _check_finite(self, ("q_output",), strict=True)
 
-    def check_combination(self) -> None:
-        """``ValueError`` for settings that cannot go together (checked when the controller is
-        built, and before any work by the command line, after all ``--set``)."""
-        if self.multistart and self.solver != "gn":
-            raise ValueError(f"nmpc.multistart compares the costs that solver gn reports, from the shifted plan and "
-                             f"from the inverse model's inputs; nmpc.solver is {self.solver!r} (allowed with it: gn)")
+    def check_combination(self, solvers: SolverSettings | None = None) -> None:
+        """``ValueError`` for settings that cannot go together, also with the ``solvers``
+        given (checked when the controller is built, and before any work by the command
+        line, after all ``--set``)."""
+        if self.multistart and self.solver not in MULTISTART_SOLVERS:
+            raise ValueError(f"nmpc.multistart compares the costs that solver gn or the RTI step reports, from the "
+                             f"shifted plan and from the inverse model's inputs; nmpc.solver is {self.solver!r} "
+                             f"(allowed with it: {', '.join(MULTISTART_SOLVERS)}; or set nmpc.multistart=false)")
+        if (self.multistart and self.solver != "gn" and solvers is not None
+                and not solvers.rti.condensed):
+            raise ValueError("nmpc.multistart compares the costs of two RTI plans over the inputs; "
+                             "solver.rti.condensed=false plans the states too: drop one of the two settings")
 
 
 @dataclass(frozen=True)

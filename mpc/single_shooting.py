@@ -195,7 +195,9 @@ class SingleShootingProblem(TrackingProblem):
             upper = np.concatenate((b["ubx"], b["ubg"]))
             self.rti = gauss_newton_step(linearise, cost, lower, upper, step_lengths=(0.5, 0.25, 0.125), qp=rti.qp,
                                          qp_iterations=rti.qp_iterations, line_search=rti.line_search)
+            self.rti_cost = cost
         else:
+            self.rti_cost = ca.Function("rti_cost", [U, params], [ca.sumsqr(residual)])
             residual = ca.Function("residual", [U, params], [residual])
             constraints = ca.Function("constraints", [U, params], [du if self._rate_bounded else ca.SX(0, 1)])
             self.rti = rti_function(residual, constraints, b["lbg"], b["ubg"], b["lbx"], b["ubx"],

@@ -78,15 +78,17 @@ CASES = [
     (["run", "dea", "single-sine", "--controller", "nmpc", "--set", "nmpc.runtime=c", "--no-plots", "--duration",
       "0.1"], 2, "nmpc.runtime=c runs the generated controller, whose solver is the RTI step; nmpc.solver is 'gn'"),
     (RUN + SHORT + ["--set", "nmpc.runtime=fortran"], 2, "runtime 'fortran' is unknown; allowed: python, c, auto"),
-    (["run", "pam", "square-20", "--controller", "nmpc", "--set", "nmpc.multistart=true", "--no-plots", "--duration",
-      "0.1"], 2, "nmpc.multistart compares the costs that solver gn reports, from the shifted plan and from the "
-     "inverse model's inputs; nmpc.solver is 'rti-c' (allowed with it: gn)"),
+    (["run", "pam", "square-20", "--controller", "nmpc", "--set", "nmpc.multistart=true", "--set", "nmpc.solver=sqp",
+      "--no-plots", "--duration", "0.1"], 2, "nmpc.multistart compares the costs that solver gn or the RTI step "
+     "reports, from the shifted plan and from the inverse model's inputs; nmpc.solver is 'sqp' (allowed with it: gn, "
+     "rti, rti-c; or set nmpc.multistart=false)"),
+    (["run", "pam", "square-20", "--controller", "nmpc", "--set", "nmpc.multistart=true", "--set",
+      "solver.rti.condensed=false", "--no-plots", "--duration", "0.1"], 2, "solver.rti.condensed=false plans the "
+     "states too: drop one of the two settings"),
     (["codegen", "reluctance", "--set", "nmpc.runtime=python", "--out", "{tmp}/cg"], 2, "drop the setting here "
      "(this bench's default: auto)"),
-    (["codegen", "dea", "--set", "nmpc.multistart=true", "--out", "{tmp}/cg"], 2, "nmpc.multistart=true is the "
-     "Python gn solver's second start"),
-    (["compare", "pam", "--set", "nmpc.multistart=true", "--no-plots", "--out", "{tmp}/cmp"], 2,
-     "nmpc.multistart compares the costs that solver gn reports"),
+    (["compare", "dea", "--set", "nmpc.solver=ipopt", "--no-plots", "--out", "{tmp}/cmp"], 2,  # dea: two starts
+     "nmpc.solver is 'ipopt' (allowed with it: gn, rti, rti-c; or set nmpc.multistart=false)"),
     (["speed", "reluctance", "--set", "nmpc.runtime=python"], 2, "nmpc.runtime=python chooses where run, compare and "
      "sweep run the controller; codegen writes the generated controller and speed times the solver variants"),
     # output paths, checked before any work

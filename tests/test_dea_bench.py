@@ -82,7 +82,8 @@ def test_nmpc_beats_pid_without_failures_on_a_short_run():
 
 def test_multistart_keeps_the_lower_cost_plan_of_the_two_starts():
     """``nmpc.multistart``: each sample solves from the shifted plan and from the inverse
-    model's inputs and sends the first input of the plan with the lower cost; it needs gn."""
+    model's inputs and sends the first input of the plan with the lower cost; it needs gn
+    or the RTI step, whose costs it compares."""
     config = BENCH.configure(["nmpc.multistart=true", "nmpc.r_rate=0.01"])
     prepared = BENCH.prepare("single-sine", "nmpc", config)
     controller, problem = prepared.controller, prepared.controller.problem
@@ -105,8 +106,8 @@ def test_multistart_keeps_the_lower_cost_plan_of_the_two_starts():
         shifted, inverse = pairs[2 * k - 1], pairs[2 * k]
         best = inverse if inverse.cost < shifted.cost else shifted
         assert run.input[k] == controller.bounds.clip(float(best.u_plan[0, 0]), float(run.input[k - 1]))
-    with pytest.raises(ValueError, match="nmpc.multistart compares the costs that solver gn reports.*'rti-c'"):
-        BENCH.build_controller("nmpc", BENCH.configure(["nmpc.multistart=true", "nmpc.solver=rti-c"]))
+    with pytest.raises(ValueError, match="solver gn or the RTI step reports.*'ipopt'.*set nmpc.multistart=false"):
+        BENCH.build_controller("nmpc", BENCH.configure(["nmpc.solver=ipopt"]))  # two starts: dea's default
     # a shifted start from the first sample on: the inverse start runs every sample
     shift = BENCH.configure(["nmpc.multistart=true", "nmpc.warm_start=shift"])
     prepared = BENCH.prepare("single-sine", "nmpc", shift)
@@ -146,8 +147,10 @@ def test_full_comparison_orderings_and_nmpc():
     papers = [c for c in BENCH.controllers if c != "inverse-lmpc"]
     for scenario in BENCH.scenarios:
         assert rmse[scenario, "nmpc"] == min(rmse[scenario, c] for c in papers), scenario
-        # the exact FCKP inverse + linear MPC tracks better than the NMPC here (docs/dea.md)
-        assert rmse[scenario, "inverse-lmpc"] < rmse[scenario, "nmpc"] < rmse[scenario, "linear-mpc"], scenario
+        # the exact FCKP inverse + linear MPC: beaten on composite, 1.15-1.34x better on the
+        # other three (docs/dea.md); one start per sample was 1.4-4x behind it everywhere
+        assert rmse[scenario, "nmpc"] < 1.5 * rmse[scenario, "inverse-lmpc"], scenario
+    assert rmse["composite", "nmpc"] < rmse["composite", "inverse-lmpc"]
 
 
 @pytest.mark.slow

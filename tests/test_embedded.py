@@ -40,6 +40,9 @@ def _python_and_generated(bench_name: str, scenario: str, duration: float, assig
     # the exact KP memory, the creep memory over a window, the EKF on the mechanics, single
     # shooting, and the inverse through the creep inverse and the KP bisection
     ("dea", "square", 3.0, 2.0, ("memory.window=50",)),
+    # two starts each sample: the RTI steps from the shifted plan and from the inverse, the cheaper plan kept
+    ("dea", "single-sine", 1.0, 0.5, ("memory.window=50", "nmpc.multistart=true", "nmpc.r_rate=0.01")),
+    ("pam", "square-20", 4.0, 1.0, ("nmpc.multistart=true",)),  # the condensed multiple-shooting step's cost
 ])
 def test_the_functions_repeat_the_python_controller(bench_name, scenario, duration, moves, assignments):
     python, generated, functions = _python_and_generated(bench_name, scenario, duration, assignments)
@@ -47,6 +50,8 @@ def test_the_functions_repeat_the_python_controller(bench_name, scenario, durati
     assert np.max(np.abs(python.predicted[1:] - generated.predicted[1:])) <= 1e-9
     assert functions.stats()["failures"] == python.solver["failures"]
     assert np.ptp(generated.input) > moves  # the inputs moved: estimator and memory were exercised
+    if "nmpc.multistart=true" in assignments:  # both starts' plans were sent
+        assert 0 < python.solver["inverse_starts_kept"] < len(python.input) - 1
 
 
 def test_failures_and_lost_estimates_take_the_python_controllers_fallbacks():

@@ -311,3 +311,20 @@ def test_runtime_auto_runs_the_generated_controller_where_it_can(tmp_path, monke
         whole_memory = dea.build_controller("nmpc", dea.configure(["nmpc.runtime=auto", "nmpc.solver=rti-c"]))
     assert type(whole_memory).__name__ == "NmpcController" and whole_memory.settings.solver == "rti-c"
     assert "nmpc.runtime=auto runs the controller in Python" in caplog.text
+
+
+def test_speed_keeps_two_starts_only_for_the_solvers_that_report_a_cost():
+    """dea solves from two starts; ``speed`` times IPOPT and sqp with one (they report no
+    cost to compare) and labels the rows that have two."""
+    from hystmpc.experiments.realtime import _rti_config, speed_table
+    bench = get_bench("dea")
+    config = bench.configure()
+    assert config["nmpc"].multistart
+    starts = {v: _rti_config(bench, config, v)["nmpc"].multistart for v in ("gn", "rti", "rti-c", "ipopt", "sqp")}
+    assert starts == {"gn": True, "rti": True, "rti-c": True, "ipopt": False, "sqp": False}
+    row = {"rmse": 1e-3, "step_ms_median": 1.0, "step_ms_p95": 2.0, "step_ms_max": 3.0, "solve_ms_median": 1.0,
+           "solve_ms_p95": 2.0, "solve_ms_max": 3.0, "failures": 0}
+    table = speed_table({"bench": "dea", "scenario": "single-sine", "sample_period_ms": 10.0,
+                         "variants": [{"variant": "gn", "multistart": True, **row},
+                                      {"variant": "ipopt", "multistart": False, **row}]})
+    assert "| gn, two starts |" in table and "| ipopt |" in table

@@ -98,7 +98,8 @@ def build_nmpc(config: dict) -> NmpcController:
     W offset d from the laser; the problem is single shooting (the creep is not Markov).
 
     Warm start: the shifted previous plan; at start-up and after a failed solve, the inverse
-    model (static mechanics, creep inverse, implicit inverse).
+    model (static mechanics, creep inverse, implicit inverse). With ``nmpc.multistart`` (the
+    default) every sample also solves from the inverse model and keeps the cheaper plan.
     """
     model: DeaParams = config["model"]
     smoothing: Smoothing = config["smoothing"]
@@ -157,8 +158,10 @@ def _defaults() -> dict:
             "pid": PidGains(kp=0.8, ki=1.67, kd=0.01), "bic": BicSettings(),
             "linear_mpc": LinearMpcSettings(),
             "lmpc": InverseLmpcSettings(horizon=15, q_output=1e4, r_rate=1.0),
-            "nmpc": NmpcSettings(horizon=15, q_output=1e4, r_rate=1.0, solver="gn"),
-            "smoothing": Smoothing(eps=1e-3, direction_eps=1e-4),
+            # two starts (the shifted plan and the inverse model's inputs) let the voltage jump across
+            # a hysteresis loop where it must, so a light rate weight pays (docs/dea.md)
+            "nmpc": NmpcSettings(horizon=15, q_output=1e4, r_rate=0.01, solver="gn", multistart=True),
+            "smoothing": Smoothing(eps=1e-4, direction_eps=3e-5),
             # ftol: a Gauss-Newton solve that crawls (step fractions of 1/256 lowering the cost by
             # 0.03 % per iteration) stops as converged instead of failing at max_iter (docs/dea.md)
             # rti (and the generated controller): 3 Gauss-Newton steps per sample (1 step left
