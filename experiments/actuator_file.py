@@ -6,14 +6,16 @@ From one file hystmpc builds, for every command that takes a bench:
   creep if the family has one, and the linear block after it (exact zero-order-hold
   discretisation), with the dead time;
 * the **controllers**: ``nmpc``, and the baselines ``pid`` and ``inverse-ff-pid``, whose
-  gains are tuned automatically on the nominal model (:mod:`hystmpc.experiments.tuning`);
+  gains are tuned automatically on the nominal model (:mod:`hystmpc.experiments.tuning`),
+  and ``inverse-lmpc``, the inverse model in series with the input and a linear MPC on the
+  linear block, whose rate weight is tuned the same way;
 * a **simulated plant**: the exact, non-smooth model with every parameter perturbed by a
   seeded relative ``mismatch`` and sensor noise, so that no controller runs on its own model;
 * two **scenarios** from the output range: ``sine`` and ``staircase``.
 
 Groups for ``--set`` (and for optional tables of the same names in the file): ``plant``
 (mismatch, seed, noise), ``model`` (``model.hysteresis.*``: the family's parameters;
-``model.dynamics.*``), ``nmpc``, ``smoothing``, ``solver``, ``pid``, ``inverse_ff_pid``.
+``model.dynamics.*``), ``nmpc``, ``smoothing``, ``solver``, ``pid``, ``inverse_ff_pid``, ``lmpc``.
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from hystmpc.experiments.baselines import PidController, PidGains, inverse_feedforward_pid
+from hystmpc.experiments.baselines import InverseCompensation, PidController, PidGains, inverse_feedforward_pid
 from hystmpc.experiments.bench import Bench, ControllerSpec
 from hystmpc.experiments.config import apply_overrides, get_value
 from hystmpc.experiments.runner import Scenario
@@ -39,12 +41,15 @@ from hystmpc.models.identification import FAMILIES
 from hystmpc.models.linear_dynamics import LinearDynamics
 from hystmpc.models.prediction import Smoothing, build_prediction_model
 from hystmpc.mpc import InputBounds, NmpcController, NmpcSettings, SolverSettings
+from hystmpc.mpc.linear_mpc import InverseLinearMpc, LinearMpcSettings
 from hystmpc.plants.actuator import HysteresisActuator
 
 LOG = logging.getLogger("hystmpc")
-TUNING_RULE = "mean-rmse-nelder-mead/3"
+TUNING_RULE = "mean-rmse-nelder-mead/5"
 """Names the tuning rule in the cache key: change it when the rule changes."""
-GROUP_TABLES = ("nmpc", "smoothing", "solver", "pid", "inverse_ff_pid")
+LMPC_RATE_FACTORS = (0.01, 0.1, 1.0, 10.0, 100.0, 1e3, 1e4)
+"""The rate weights ``inverse-lmpc``'s tuning tries, relative to the default (the NMPC's)."""
+GROUP_TABLES = ("nmpc", "smoothing", "solver", "pid", "inverse_ff_pid", "lmpc")
 """Optional tables that set the groups of the same name (as ``--set`` would)."""
 TABLES = {
     "model": {"file"},
@@ -276,7 +281,10 @@ class ActuatorSpec:
                   "nmpc": NmpcSettings(horizon=horizon, q_output=(100 / span_y) ** 2,
                                        r_rate=1e-3 * (100 / span_u) ** 2, solver="rti-c"),
                   "smoothing": Smoothing(eps=5e-5 * span_u), "solver": SolverSettings(),
-                  "pid": PidGains(), "inverse_ff_pid": FeedforwardPidGains()}
+                  "pid": PidGains(), "inverse_ff_pid": FeedforwardPidGains(),
+                  # the NMPC's horizon and weights, the rate weight on the virtual input (output units)
+                  "lmpc": LinearMpcSettings(horizon=horizon, q_output=(100 / span_y) ** 2,
+                                            r_rate=1e-3 * (100 / span_y) ** 2)}
         self._check_types(config)
         return apply_overrides(config, self.overrides)
 
@@ -340,11 +348,33 @@ class ActuatorSpec:
         noise = max(self.noise, 1e-3 * (self.output_range[1] - self.output_range[0]))
         return NmpcController(pm, bounds, config["nmpc"], config["solver"], sensor_noise=noise)
 
-    def tuned_gains(self, config: dict) -> dict[str, PidGains]:
-        """Both baselines' gains by :func:`hystmpc.experiments.tuning.tune_pid` on the
+    def build_inverse_lmpc(self, config: dict, settings: LinearMpcSettings | None = None) -> InverseLinearMpc:
+        """``inverse-lmpc`` on the ``model`` group: the exact inverse hysteresis in series with
+        the input (its memory follows the inputs sent) turns a virtual input ``v`` into the
+        input; a linear MPC with an input disturbance (offset-free; creep lands in it) controls
+        the linear block and dead time from ``v``."""
+        model: ActuatorModel = config["model"]
+        hysteresis, _ = self.hysteresis(model)
+        linear = model.dynamics.virtual_input_model(self.sample_period)
+        noise = max(self.noise, 1e-3 * (self.output_range[1] - self.output_range[0]))
+        n_block = linear.nx - model.dynamics.delay_samples
+        # as the NMPC's EKF (DisturbanceEKF.from_sensor_noise); the queue of virtual inputs is known exactly
+        process = [(0.01 * noise) ** 2] * n_block + [1e-12 * noise**2] * model.dynamics.delay_samples + [noise**2]
+        initial = [(10 * noise) ** 2] * n_block + [1e-12 * noise**2] * model.dynamics.delay_samples + \
+            [(1000 * noise) ** 2]
+        return InverseLinearMpc(
+            linear, InverseCompensation(hysteresis, sensors=lambda m, comp: [m.y]),
+            InputBounds(*self.input_bounds, self.input_rate), settings or config["lmpc"], process_noise=process,
+            measurement_noise=[noise**2], initial_state=lambda z: np.concatenate(
+                ([z[0]], np.zeros(n_block - 1), np.full(model.dynamics.delay_samples, z[0]))),
+            initial_covariance=initial)
+
+    def tuned_gains(self, config: dict) -> dict[str, Any]:
+        """Both PID baselines' gains by :func:`hystmpc.experiments.tuning.tune_pid` on the
         nominal ``model`` group; for ``inverse-ff-pid`` also its preview: of dead time + one
         sample + the block's lag and its two neighbours, the one with the best point of the
-        coarse gain grid, before the gains are tuned at it.
+        coarse gain grid, before the gains are tuned at it. For ``inverse-lmpc`` its rate
+        weight (:meth:`_tune_lmpc`).
 
         Tuning takes seconds to tens of seconds, so the result is kept in memory and on disk
         (:func:`cache_dir`), keyed by everything it depends on.
@@ -355,19 +385,21 @@ class ActuatorSpec:
             self._tuned[key] = self._cached_tuning(model, config)
         return self._tuned[key]
 
-    def _cached_tuning(self, model: ActuatorModel, config: dict) -> dict[str, PidGains]:
+    def _cached_tuning(self, model: ActuatorModel, config: dict) -> dict[str, Any]:
         from hystmpc.experiments.report import version
         identity = json.dumps({"rule": TUNING_RULE, "version": version(), "model": dataclasses.asdict(model),
                                "sample_period": self.sample_period, "bounds": self.input_bounds,
                                "rate": str(self.input_rate), "scenarios": [self.sine_hz, self.step_s, self.duration_s],
-                               "output_range": self.output_range}, sort_keys=True, default=str)
+                               "output_range": self.output_range, "noise": self.noise,
+                               "lmpc": dataclasses.asdict(config["lmpc"])}, sort_keys=True, default=str)
         path = cache_dir() / f"tuning-{hashlib.sha256(identity.encode()).hexdigest()[:20]}.json"
         try:
             stored = json.loads(path.read_text())
-            return {"pid": PidGains(**stored["pid"]), "inverse_ff_pid": FeedforwardPidGains(**stored["inverse_ff_pid"])}
+            return {"pid": PidGains(**stored["pid"]), "inverse_ff_pid": FeedforwardPidGains(**stored["inverse_ff_pid"]),
+                    "lmpc": LinearMpcSettings(**stored["lmpc"])}
         except (OSError, ValueError, KeyError, TypeError):
             pass
-        LOG.info("tuning the PID baselines of %s on its nominal model (once; cached in %s)", self.name, path.parent)
+        LOG.info("tuning the baselines of %s on its nominal model (once; cached in %s)", self.name, path.parent)
         tuned = self._tune(model, config)
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
@@ -378,7 +410,7 @@ class ActuatorSpec:
             LOG.info("could not cache the tuned gains (%s)", exc)
         return tuned
 
-    def _tune(self, model: ActuatorModel, config: dict) -> dict[str, PidGains]:
+    def _tune(self, model: ActuatorModel, config: dict) -> dict[str, Any]:
         from hystmpc.experiments.tuning import coarse_start, mean_rmse, tune_pid
         hysteresis, _ = self.hysteresis(model)
         state = hysteresis.initial_state(self.input_bounds[0])
@@ -404,7 +436,25 @@ class ActuatorSpec:
             return coarse_start(cost, gain, dead, self.sample_period)[1]
         preview = min((rule - 1, rule, rule + 1), key=coarse)
         gains = tune_pid(feedforward(preview), plant, scenarios, gain, dead, self.sample_period)[0]
-        return {"pid": pid, "inverse_ff_pid": FeedforwardPidGains(**dataclasses.asdict(gains), preview=preview)}
+        return {"pid": pid, "inverse_ff_pid": FeedforwardPidGains(**dataclasses.asdict(gains), preview=preview),
+                "lmpc": self._tune_lmpc(model, config, scenarios)}
+
+    def _tune_lmpc(self, model: ActuatorModel, config: dict, scenarios: list[Scenario]) -> LinearMpcSettings:
+        """``inverse-lmpc``'s rate weight: of the default times each of :data:`LMPC_RATE_FACTORS`,
+        the one with the least mean RMSE over ``scenarios`` with no oscillating run, on the
+        nominal model with the file's sensor noise (the noise sets how fast it may act)."""
+        from hystmpc.experiments.runner import simulate
+        plant = self.plant_of(model, self.noise)
+        base: LinearMpcSettings = config["lmpc"]
+        best, best_cost = base, np.inf
+        for factor in LMPC_RATE_FACTORS:
+            settings = dataclasses.replace(base, r_rate=base.r_rate * factor)
+            runs = [simulate(plant, self.build_inverse_lmpc(config | {"model": model}, settings), scenario)
+                    for scenario in scenarios]
+            cost = float(np.mean([run.metrics["rmse"] for run in runs]))
+            if np.isfinite(cost) and cost < best_cost and not any(run.metrics["oscillating"] for run in runs):
+                best, best_cost = settings, cost
+        return best
 
     def scenarios(self) -> dict[str, Scenario]:
         """``sine`` and ``staircase`` over the output range, from the output at rest."""
@@ -442,6 +492,9 @@ class ActuatorSpec:
             "inverse-ff-pid": ControllerSpec("inverse-ff-pid", "inverse hysteresis feed-forward + PID, gains tuned "
                                              "on the nominal model", lambda c: self.build_pid(c, True),
                                              ("model", "inverse_ff_pid")),
+            "inverse-lmpc": ControllerSpec("inverse-lmpc", "inverse hysteresis model in series with the input + "
+                                           "linear MPC (OSQP) on the linear block, rate weight tuned on the nominal "
+                                           "model", self.build_inverse_lmpc, ("model", "lmpc")),
             "nmpc": ControllerSpec("nmpc", "NMPC on the smoothed identified model, inverse warm start",
                                    self.build_nmpc, ("model", "nmpc", "smoothing", "solver")),
         }

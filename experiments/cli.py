@@ -518,7 +518,7 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
     config = _work_config(bench, args.overrides, args.force)
     if "nmpc" in controllers and "nmpc" in config:
         try:
-            config["nmpc"].check_combination(config.get("solver"))  # before any baseline runs  # before any run
+            config["nmpc"].check_combination(config.get("solver"))  # before any baseline runs
         except ValueError as exc:
             raise UsageError(str(exc)) from None
     if args.reference is not None and not scenario_names:
@@ -589,8 +589,10 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
             tuned = [f"{g}: kp {config[g].kp:.4g}, ki {config[g].ki:.4g}, kd {config[g].kd:.4g}"
                      + (f", preview {config[g].preview}" if hasattr(config[g], "preview") else "")
                      for g in ("pid", "inverse_ff_pid") if any(c.replace("-", "_") == g for c in controllers)]
+            if "inverse-lmpc" in controllers and "lmpc" in config:
+                tuned.append(f"inverse-lmpc: r_rate {config['lmpc'].r_rate:.4g}")
             if tuned:
-                print("PID gains (tuned on the nominal model unless set): " + "; ".join(tuned))
+                print("baseline gains (tuned on the nominal model unless set): " + "; ".join(tuned))
         nmpc_runs = [r for r in runs if r.solver]
         for r in nmpc_runs:
             print("real time: " + r.real_time_verdict())

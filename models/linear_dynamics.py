@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hystmpc.models.prediction import Dynamics
+from hystmpc.models.prediction import Dynamics, PredictionModel
 
 KINDS = ("none", "first-order", "second-order")
 
@@ -92,6 +92,27 @@ class LinearDynamics:
                             lambda x, u, h, d: [x[1], wn**2 * (h - x[0]) - 2 * zeta * wn * x[1]],
                             output=lambda x, h: x[0], steady_input=lambda y: y)
         return None
+
+    def virtual_input_model(self, sample_period: float) -> PredictionModel:
+        """The block driven by a virtual input ``v`` (the hysteresis output it asks for) plus an
+        input disturbance ``d``, after the dead time (a queue of ``v``): what is left between
+        an inverse hysteresis compensation and the output, for a linear MPC. States: the
+        block's (``output`` for ``none``: the output follows ``h`` one sample later) and
+        ``delay_1..delay_D``; sensor: the output."""
+        import casadi as ca
+
+        block = self.discrete(sample_period, hold=True)
+        n, D = len(block.state_names), self.delay_samples
+        x, v, d = ca.SX.sym("x", n + D), ca.SX.sym("v"), ca.SX.sym("d")
+        v_in = x[n] if D else v
+        x_next = ca.vertcat(*block.rhs(x[:n], v_in, v_in + d, 0.0), *[x[n + i] for i in range(1, D)],
+                            *([v] if D else []))
+        return PredictionModel(
+            step=ca.Function("virtual_step", [x, v, d], [x_next], ["x", "u", "d"], ["x_next"]),
+            output=ca.Function("virtual_output", [x, d], [x[0]], ["x", "d"], ["y"]),
+            measure=ca.Function("virtual_measure", [x, d], [x[0]], ["x", "d"], ["z"]),
+            sample_period=sample_period,
+            state_names=(*block.state_names, *(f"delay_{i + 1}" for i in range(D))))
 
     def lag(self) -> float:
         """Low-frequency group delay (s) of the block, dead time not included (a feed-forward's preview)."""

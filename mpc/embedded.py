@@ -344,7 +344,7 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     w, success = rti_steps(u_guess)
     if s.multistart:  # also from the inverse (the same start on a restart, so the first plan is kept)
         if u_inv is None or problem.rti_cost is None:
-            raise NotGeneratable("nmpc.multistart needs an inverse model and a single-shooting RTI step (its cost)")
+            raise NotGeneratable("nmpc.multistart needs an inverse model and an RTI step over the inputs (its cost)")
         w_inv, success_inv = rti_steps(u_inv)
         take = ca.logic_and(success_inv, ca.logic_or(ca.logic_not(success),
                                                      problem.rti_cost(w_inv, p) < problem.rti_cost(w, p)))

@@ -36,7 +36,7 @@ class Solution:
     solve_time: float
     """Wall-clock time of the solve (s)."""
     cost: float = float("nan")
-    """The objective at ``u_plan``, where the solver reports it (``gn``; the single-shooting RTI step)."""
+    """The objective at ``u_plan``, where the solver reports it (``gn``; the RTI step with ``multistart``)."""
 
 
 def nlp_solver(name: str, nlp: dict, solver: str, settings: NlpSettings) -> ca.Function:

@@ -62,9 +62,9 @@ class NmpcSettings:
     and keep the plan with the lower cost. Across a hysteresis loop the tracking problem has
     several local minima, and the shifted plan can sit in the worse one (dea: RMSE 0.0034 ->
     0.0013 mm on single-sine with ``r_rate`` 0.01, at twice the solves; the iteration counts
-    then add up both). Needs an inverse model and solver ``gn``, ``rti`` or ``rti-c`` on
-    an input-driven model (single shooting: the problem whose cost they report); the
-    generated controller runs the RTI steps from both starts."""
+    then add up both). Needs an inverse model and solver ``gn``, ``rti`` or ``rti-c`` (the
+    RTI step condensed onto the inputs), which report the cost compared; the generated
+    controller runs the RTI steps from both starts."""
     runtime: str = "python"
     """Where the controller runs in closed loop: ``python``; ``c``: the whole generated
     controller that ``hystmpc codegen`` writes (estimator, warm start, RTI steps,

@@ -56,6 +56,49 @@ def test_nmpc_halves_the_error_of_inverse_feedforward_pid(piezo, capsys):
     assert gains["ki"] > 0  # tuned, not the zero default
 
 
+def test_inverse_lmpc_is_tuned_and_the_files_table_wins(piezo, tmp_path):
+    """``inverse-lmpc`` on an actuator file: the exact inverse in series with the input and a
+    linear MPC on the second-order block and its dead time; its rate weight is the grid point
+    with the least mean RMSE on the nominal model. A file's ``[lmpc]`` table wins."""
+    from hystmpc.experiments.actuator_file import LMPC_RATE_FACTORS, ActuatorSpec
+    out = piezo / "compare"
+    if not (out / "results.json").exists():
+        assert main(["compare", str(piezo / "piezo.toml"), "--out", str(out), "--no-plots", "--quiet"]) == 0
+    runs = {(r["scenario"], r["controller"]): r for r in json.loads((out / "results.json").read_text())["runs"]}
+    spec = ActuatorSpec(piezo / "piezo.toml")
+    default = spec._configured()["lmpc"].r_rate
+    tuned = runs["sine", "inverse-lmpc"]["parameters"]["lmpc"]["r_rate"]
+    assert any(tuned == pytest.approx(default * f, rel=1e-12) for f in LMPC_RATE_FACTORS)
+    for scenario in ("sine", "staircase"):
+        lmpc = runs[scenario, "inverse-lmpc"]
+        assert lmpc["solver"]["failures"] == 0
+        assert lmpc["metrics"]["rmse"] < 0.5 * runs[scenario, "inverse-ff-pid"]["metrics"]["rmse"], scenario
+    shutil.copy(piezo / "piezo_model.json", tmp_path / "piezo_model.json")
+    (tmp_path / "piezo.toml").write_text((piezo / "piezo.toml").read_text() + "\n[lmpc]\nr_rate = 0.5\n")
+    assert ActuatorSpec(tmp_path / "piezo.toml").bench().configure()["lmpc"].r_rate == 0.5
+
+
+def test_the_virtual_input_model_is_the_blocks_exact_response():
+    """The linear MPC's model of an actuator file (the block after the hysteresis, driven by
+    the hysteresis output, the dead time as a queue) gives the identified block's response."""
+    import numpy as np
+
+    from hystmpc.models.linear_dynamics import LinearDynamics
+    h = np.concatenate(([0.0], np.sin(0.3 * np.arange(59)) + 0.2 * np.arange(59) / 59))
+    for block in (LinearDynamics("none", delay_samples=2), LinearDynamics("first-order", time_constant=0.004),
+                  LinearDynamics("second-order", natural_frequency_hz=180, damping=0.25, delay_samples=1)):
+        model = block.virtual_input_model(1e-3)
+        x, outputs = np.zeros(model.nx), []
+        for v in h:
+            outputs.append(float(model.output(x, 0.0)))
+            x = np.asarray(model.step(x, v, 0.0)).ravel()
+        assert np.max(np.abs(np.array(outputs) - block.response(h, 1e-3))) < 1e-12, block.kind
+        x = np.zeros(model.nx)
+        for _ in range(400):  # the disturbance enters with the virtual input: a unit offset at rest
+            x = np.asarray(model.step(x, 0.0, 1.0)).ravel()
+        assert float(model.output(x, 0.0)) == pytest.approx(1.0, abs=1e-9)
+
+
 def test_run_takes_a_reference_file_without_a_scenario(piezo, tmp_path):
     ref = tmp_path / "ref.csv"
     ref.write_text("t,displacement\n0,0\n0.05,4\n0.1,4\n")
