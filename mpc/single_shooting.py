@@ -37,13 +37,16 @@ class BufferedEvaluation:
 
     def __init__(self, fun: ca.Function):
         def layout(shape, sparsity):
-            return shape, *(np.asarray(v, int) for v in sparsity.get_triplet())
+            dense = sparsity.is_dense()
+            return shape, dense, *(np.asarray(v, int) for v in sparsity.get_triplet())
         self._names = [fun.name_in(i) for i in range(fun.n_in())]
+        self._index = {name: i for i, name in enumerate(self._names)}
         self._defaults = [fun.default_in(i) for i in range(fun.n_in())]
-        self._inputs = [np.zeros(fun.nnz_in(i)) for i in range(fun.n_in())]
+        self._inputs = [np.full(fun.nnz_in(i), self._defaults[i]) for i in range(fun.n_in())]
         self._outputs = [np.zeros(fun.nnz_out(i)) for i in range(fun.n_out())]
         self._in_layout = [layout(fun.size_in(i), fun.sparsity_in(i)) for i in range(fun.n_in())]
         self._out_layout = [layout(fun.size_out(i), fun.sparsity_out(i)) for i in range(fun.n_out())]
+        self._given: set[int] = set()  # inputs that hold a given value, not their default
         self._buffer, self._evaluate = fun.buffer()
         for i, a in enumerate(self._inputs):
             self._buffer.set_arg(i, memoryview(a))
@@ -55,28 +58,35 @@ class BufferedEvaluation:
         name, dense, the ones not given at the Function's defaults."""
         if len(args) > len(self._names):
             raise ValueError(f"{len(args)} arguments for a Function of {len(self._names)} inputs")
-        unknown = set(named) - set(self._names)
-        if unknown:
-            raise ValueError(f"unknown input(s) {sorted(unknown)}; allowed: {', '.join(self._names)}")
-        values = dict(zip(self._names, args, strict=False))  # the ones after the last given: defaults
-        values.update(named)
-        for name, target, default, (shape, rows, cols) in zip(self._names, self._inputs, self._defaults,
-                                                               self._in_layout, strict=True):
-            value = values.get(name)
-            if value is None:
-                target.fill(default)
-                continue
-            value = np.asarray(value, float)
+        given = dict(enumerate(args))
+        for name, value in named.items():
+            if name not in self._index:
+                raise ValueError(f"unknown input(s) {sorted(set(named) - set(self._index))}; allowed: "
+                                 f"{', '.join(self._names)}")
+            given[self._index[name]] = value
+        now = {i for i, value in given.items() if value is not None}
+        for i in self._given - now:  # given last time, not now: back to the default
+            self._inputs[i].fill(self._defaults[i])
+        self._given = now
+        for i in self._given:
+            target, (shape, dense, rows, cols) = self._inputs[i], self._in_layout[i]
+            value = np.asarray(given[i], float)
             vector = 1 in shape or value.ndim < 2
             if value.size != shape[0] * shape[1] or not (vector or value.shape == tuple(shape)):
-                raise ValueError(f"input {name} needs shape {tuple(shape)}, got {value.shape}")
-            target[:] = np.reshape(value, shape, order="F")[rows, cols]
+                raise ValueError(f"input {self._names[i]} needs shape {tuple(shape)}, got {value.shape}")
+            if dense:
+                target[:] = value.ravel() if vector else value.ravel(order="F")
+            else:
+                target[:] = np.reshape(value, shape, order="F")[rows, cols]
         self._evaluate()
         outputs = []
-        for values_nz, (shape, rows, cols) in zip(self._outputs, self._out_layout, strict=True):
-            dense = np.zeros(shape)
-            dense[rows, cols] = values_nz
-            outputs.append(dense[:, 0] if shape[1] == 1 else dense)
+        for values_nz, (shape, dense, rows, cols) in zip(self._outputs, self._out_layout, strict=True):
+            if dense:
+                outputs.append(values_nz.copy() if shape[1] == 1 else values_nz.reshape(shape, order="F").copy())
+                continue
+            full = np.zeros(shape)
+            full[rows, cols] = values_nz
+            outputs.append(full[:, 0] if shape[1] == 1 else full)
         return outputs
 
 
@@ -169,12 +179,16 @@ class SingleShootingProblem(TrackingProblem):
     def _build_gauss_newton(self, U, params, residual) -> None:
         N = self.horizon
         evaluate = ca.Function("gn_eval", [U, params], [residual, ca.jacobian(residual, U)])
+        # the line search's trials need the residual only; most of them are rejected
+        residual_only = ca.Function("gn_residual", [U, params], [residual])
         try:  # compiled: the same numbers to the last bit, a fifth of the time (dea: 71 against 342 µs per call)
             self._gn_eval = compile_function(evaluate, flags=GN_COMPILE_FLAGS)
+            self._gn_residual = compile_function(residual_only, flags=GN_COMPILE_FLAGS)
         except (RuntimeError, OSError) as exc:  # no compiler, one that fails, or an unwritable cache: slower
             LOG.warning(f"{str(exc)[:300]}: solver gn evaluates its residual and Jacobian in-process, slower")
-            self._gn_eval = evaluate
+            self._gn_eval, self._gn_residual = evaluate, residual_only
         self._gn_buffered = BufferedEvaluation(self._gn_eval)
+        self._gn_residual_buffered = BufferedEvaluation(self._gn_residual)
         H = ca.Sparsity.dense(N, N)
         A = ca.DM(np.eye(N) - np.eye(N, k=-1)) if self._rate_bounded else ca.DM(0, N)
         self._A = np.asarray(A)
@@ -228,7 +242,7 @@ class SingleShootingProblem(TrackingProblem):
             t = 1.0
             while t > 1e-3:
                 trial = u + t * step
-                res_t, J_t = self._gn_buffered(trial, p)
+                res_t = self._gn_residual_buffered(trial, p)[0]
                 cost_t = float(res_t @ res_t)
                 if cost_t <= cost:
                     break
@@ -236,6 +250,7 @@ class SingleShootingProblem(TrackingProblem):
             else:  # no descent left: stationary, unless the cost stopped being a number
                 finite = np.isfinite(cost_t)
                 return u, bool(finite), "Solve_Succeeded" if finite else "Non_Finite_Cost", it, cost
+            res_t, J_t = self._gn_buffered(trial, p)  # the Jacobian at the accepted trial only
             stalled = cost - cost_t < gn.ftol * cost
             u, res, J, cost = trial, res_t, J_t, cost_t
             if np.max(np.abs(t * step)) <= gn.tol * (1.0 + np.max(np.abs(u))) or stalled:

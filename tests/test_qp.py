@@ -191,6 +191,16 @@ def test_buffered_evaluation_gives_a_calls_numbers():
     step, cost, _, _ = BufferedEvaluation(qp)(**args)
     assert np.array_equal(step, np.asarray(expected["x"]).ravel()) and cost == float(expected["cost"])
     assert step.min() < 0 < step.max() <= 1  # lbx took its default, -inf; ubx the value given
+    buffered = BufferedEvaluation(qp)  # a bound given in one call takes its default in the next without it
+    buffered(**{**args, "ubx": np.full(4, 1e-3)})
+    again = {k: v for k, v in args.items() if k != "ubx"}
+    free = np.asarray(qp(**again)["x"]).ravel()
+    assert free.max() > 1e-3 and np.array_equal(buffered(**again)[0], free)
+    M, v = ca.SX.sym("M", 3, 2), ca.SX.sym("v", 2)
+    product = ca.Function("product", [M, v], [M @ v, 2 * M])  # dense, not symmetric: column-major order
+    m = rng.normal(size=(3, 2))
+    out, twice = BufferedEvaluation(product)(m, np.array([1.0, -2.0]))
+    assert np.array_equal(out, m @ [1.0, -2.0]) and np.array_equal(twice, 2 * m)
     with pytest.raises(ValueError, match="unknown input"):
         BufferedEvaluation(qp)(hh=H)
     with pytest.raises(ValueError, match=r"input h needs shape \(4, 4\), got \(2, 8\)"):
