@@ -257,12 +257,17 @@ class InverseCompensation:
     virtual_of, hysteresis_output_of : callable, optional
         Between the hysteresis output and the virtual input, both ways, monotone
         (default: the same; a static output map, such as force from flux).
+    rest_input : float, optional
+        The hysteresis input the memory starts from when it follows the inputs sent (the
+        plant's rest input; default: the model's own initial state).
     """
 
     def __init__(self, hysteresis: HysteresisModel, sensors: Callable, driven_by: Callable | None = None,
                  input_of: Callable | None = None, hysteresis_input_of: Callable | None = None,
-                 virtual_of: Callable | None = None, hysteresis_output_of: Callable | None = None):
+                 virtual_of: Callable | None = None, hysteresis_output_of: Callable | None = None,
+                 rest_input: float | None = None):
         self.hysteresis, self._sensors, self._driven_by = hysteresis, sensors, driven_by
+        self._rest_input = rest_input
         self._input_of = input_of or (lambda s: s)
         self._hysteresis_input_of = hysteresis_input_of or (lambda u: u)
         self._virtual_of = virtual_of or (lambda h: h)
@@ -285,7 +290,8 @@ class InverseCompensation:
             self._state = (self.hysteresis.initial_state(s) if self._state is None
                            else self.hysteresis.step(self._state, s)[0])
         elif self._state is None:
-            self._state = self.hysteresis.initial_state()
+            self._state = (self.hysteresis.initial_state() if self._rest_input is None
+                           else self.hysteresis.initial_state(self._rest_input))
 
     def to_input(self, v: float) -> float:
         """The input that gives the virtual input ``v`` from the present memory."""

@@ -96,7 +96,8 @@ class NmpcSettings:
         if (self.multistart and self.solver != "gn" and solvers is not None
                 and not solvers.rti.condensed):
             raise ValueError("nmpc.multistart compares the costs of two RTI plans over the inputs; "
-                             "solver.rti.condensed=false plans the states too: drop one of the two settings")
+                             "solver.rti.condensed=false (multiple shooting only) plans the states too: drop it, or "
+                             "set nmpc.multistart=false")
 
 
 @dataclass(frozen=True)

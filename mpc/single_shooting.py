@@ -75,7 +75,7 @@ class BufferedEvaluation:
             if value.size != shape[0] * shape[1] or not (vector or value.shape == tuple(shape)):
                 raise ValueError(f"input {self._names[i]} needs shape {tuple(shape)}, got {value.shape}")
             if dense:
-                target[:] = value.ravel() if vector else value.ravel(order="F")
+                target[:] = value.ravel(order="F")
             else:
                 target[:] = np.reshape(value, shape, order="F")[rows, cols]
         self._evaluate()
@@ -176,17 +176,22 @@ class SingleShootingProblem(TrackingProblem):
         cost = ca.Function("rti_cost", [U, params], [ca.sumsqr(residual(self._compact_predict(p, U)))])
         return linearise, cost
 
+    @staticmethod
+    def _compiled_or_in_process(fun: ca.Function, what: str) -> ca.Function:
+        try:
+            return compile_function(fun, flags=GN_COMPILE_FLAGS)
+        except (RuntimeError, OSError) as exc:  # no compiler, one that fails, or an unwritable cache: slower
+            LOG.warning(f"{str(exc)[:300]}: solver gn evaluates {what} in-process, slower")
+            return fun
+
     def _build_gauss_newton(self, U, params, residual) -> None:
         N = self.horizon
         evaluate = ca.Function("gn_eval", [U, params], [residual, ca.jacobian(residual, U)])
         # the line search's trials need the residual only; most of them are rejected
         residual_only = ca.Function("gn_residual", [U, params], [residual])
-        try:  # compiled: the same numbers to the last bit, a fifth of the time (dea: 71 against 342 µs per call)
-            self._gn_eval = compile_function(evaluate, flags=GN_COMPILE_FLAGS)
-            self._gn_residual = compile_function(residual_only, flags=GN_COMPILE_FLAGS)
-        except (RuntimeError, OSError) as exc:  # no compiler, one that fails, or an unwritable cache: slower
-            LOG.warning(f"{str(exc)[:300]}: solver gn evaluates its residual and Jacobian in-process, slower")
-            self._gn_eval, self._gn_residual = evaluate, residual_only
+        # compiled: the same numbers to the last bit, a fifth of the time (dea: 71 against 342 µs per call)
+        self._gn_eval = self._compiled_or_in_process(evaluate, "its residual and Jacobian")
+        self._gn_residual = self._compiled_or_in_process(residual_only, "its line search's residual")
         self._gn_buffered = BufferedEvaluation(self._gn_eval)
         self._gn_residual_buffered = BufferedEvaluation(self._gn_residual)
         H = ca.Sparsity.dense(N, N)
@@ -250,11 +255,12 @@ class SingleShootingProblem(TrackingProblem):
             else:  # no descent left: stationary, unless the cost stopped being a number
                 finite = np.isfinite(cost_t)
                 return u, bool(finite), "Solve_Succeeded" if finite else "Non_Finite_Cost", it, cost
-            res_t, J_t = self._gn_buffered(trial, p)  # the Jacobian at the accepted trial only
             stalled = cost - cost_t < gn.ftol * cost
-            u, res, J, cost = trial, res_t, J_t, cost_t
+            u, res, cost = trial, res_t, cost_t
             if np.max(np.abs(t * step)) <= gn.tol * (1.0 + np.max(np.abs(u))) or stalled:
                 return u, True, "Solve_Succeeded", it, cost
+            if it < gn.max_iter:  # the Jacobian at the accepted trial, for the next step only
+                J = self._gn_buffered(u, p)[1]
         return u, False, "Maximum_Iterations_Exceeded", gn.max_iter, cost
 
     def solve(self, condition, u_prev: float, ref, u_guess, x_guess=None, u_ff=None) -> Solution:

@@ -83,8 +83,8 @@ CASES = [
      "reports, from the shifted plan and from the inverse model's inputs; nmpc.solver is 'sqp' (allowed with it: gn, "
      "rti, rti-c; or set nmpc.multistart=false)"),
     (["run", "pam", "square-20", "--controller", "nmpc", "--set", "nmpc.multistart=true", "--set",
-      "solver.rti.condensed=false", "--no-plots", "--duration", "0.1"], 2, "solver.rti.condensed=false plans the "
-     "states too: drop one of the two settings"),
+      "solver.rti.condensed=false", "--no-plots", "--duration", "0.1"], 2, "solver.rti.condensed=false (multiple "
+     "shooting only) plans the states too: drop it, or set nmpc.multistart=false"),
     (["codegen", "reluctance", "--set", "nmpc.runtime=python", "--out", "{tmp}/cg"], 2, "drop the setting here "
      "(this bench's default: auto)"),
     (["compare", "dea", "--set", "nmpc.solver=ipopt", "--no-plots", "--out", "{tmp}/cmp"], 2,  # dea: two starts

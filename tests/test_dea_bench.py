@@ -117,6 +117,25 @@ def test_multistart_keeps_the_lower_cost_plan_of_the_two_starts():
     assert len(calls) == 2 * len(run.input)
 
 
+def test_multistart_with_the_rti_step_reports_the_cost_of_its_plan():
+    """With ``nmpc.solver=rti`` the RTI step's cost Function picks the plan (the same
+    operations run in the generated controller, test_embedded)."""
+    config = BENCH.configure(["nmpc.solver=rti", "memory.window=50"])
+    prepared = BENCH.prepare("single-sine", "nmpc", config)
+    problem, solve, checked = prepared.controller.problem, prepared.controller.problem.solve, []
+
+    def recording_solve(condition, u_prev, ref, u_guess, x_guess=None, u_ff=None):
+        solution = solve(condition, u_prev, ref, u_guess, x_guess, u_ff=u_ff)
+        p = problem._parameters(condition, u_prev, ref, u_guess if u_ff is None else u_ff)
+        assert solution.cost == float(problem.rti_cost(solution.u_plan.ravel(), p))
+        checked.append(solution.cost)
+        return solution
+    problem.solve = recording_solve
+    run = BENCH.run("single-sine", "nmpc", config, duration=0.5, prepared=prepared)
+    assert run.solver["failures"] == 0 and 0 < run.solver["inverse_starts_kept"] < len(run.input)
+    assert len(checked) == 2 * len(run.input) - 1 and np.all(np.isfinite(checked))
+
+
 def test_window_changes_only_the_controllers_memory():
     config = BENCH.configure()
     from hystmpc.experiments.config import apply_overrides
@@ -184,6 +203,9 @@ def test_gn_compiled_gives_the_in_process_numbers_to_the_last_bit(monkeypatch, c
         u, p = rng.uniform(1.0, 6.0, compiled.horizon), rng.normal(size=n_p) * 0.1
         for a, b in zip(compiled._gn_eval(u, p), in_process._gn_eval(u, p), strict=True):
             assert np.array_equal(np.asarray(a), np.asarray(b))
+        # the line search's residual-only Function gives the full evaluation's residual, bit for bit
+        for problem in (compiled, in_process):
+            assert np.array_equal(np.asarray(problem._gn_residual(u, p)), np.asarray(problem._gn_eval(u, p)[0]))
 
 
 def test_rti_step_from_small_parts_equals_the_unrolled_one():
