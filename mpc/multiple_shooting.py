@@ -7,7 +7,7 @@ import numpy as np
 
 from hystmpc.models.prediction import PredictionModel
 from hystmpc.mpc.problem import Solution, TrackingProblem
-from hystmpc.mpc.rti import REGULARISATION, compiled_or_in_process, gauss_newton_step, rti_function
+from hystmpc.mpc.rti import REGULARISATION, gauss_newton_step, rti_function
 from hystmpc.mpc.settings import InputBounds, NmpcSettings, SolverSettings
 
 
@@ -83,8 +83,7 @@ class MultipleShootingProblem(TrackingProblem):
             self.rti = self._condensed_rti(p)
         else:  # the shooting gaps are equalities and the states unbounded: qrqp
             self.rti = rti_function(self.residual, self.constraints, self._lbg, self._ubg, self._lbx, self._ubx)
-        if s.solver == "rti-c":
-            self.rti, self.compiled = compiled_or_in_process(self.rti)
+        self._compile_rti()
 
     def _condensed_rti(self, p: ca.SX) -> ca.Function:
         """The RTI step over the inputs only: the states come from a rollout from x0.

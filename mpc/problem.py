@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from hystmpc.mpc.rti import QP_TOLERANCE, feasible_guess, rti_steps
+from hystmpc.mpc.rti import QP_TOLERANCE, compiled_or_in_process, feasible_guess, rti_steps
 from hystmpc.mpc.settings import InputBounds, NlpSettings, NmpcSettings, SolverSettings
 
 
@@ -112,6 +112,14 @@ class TrackingProblem:
     def _uses_nlp_solver(self, nlp: dict) -> None:
         solver = self.settings.solver
         self._solver = nlp_solver("nmpc", nlp, solver, getattr(self.solvers, solver))
+
+    def _compile_rti(self) -> None:
+        """``rti-c``: the RTI step compiled (and, with ``multistart``, the cost it compares)."""
+        if self.settings.solver != "rti-c":
+            return
+        self.rti, self.compiled = compiled_or_in_process(self.rti)
+        if self.settings.multistart and self.rti_cost is not None:
+            self.rti_cost = compiled_or_in_process(self.rti_cost)[0]
 
     def _solve_rti(self, w0, p, finish) -> Solution:
         """``rti.iterations`` RTI steps from ``w0``; ``finish(w, finite)`` -> (u_plan, x_plan)."""

@@ -19,7 +19,6 @@ from hystmpc.mpc.rti import (
     LOG,
     REGULARISATION,
     compile_function,
-    compiled_or_in_process,
     gauss_newton_step,
     rti_function,
 )
@@ -222,8 +221,7 @@ class SingleShootingProblem(TrackingProblem):
             self.rti = rti_function(residual, constraints, b["lbg"], b["ubg"], b["lbx"], b["ubx"],
                                     step_lengths=(0.5, 0.25, 0.125), qp=rti.qp, qp_iterations=rti.qp_iterations,
                                     line_search=rti.line_search)
-        if self.settings.solver == "rti-c":
-            self.rti, self.compiled = compiled_or_in_process(self.rti)
+        self._compile_rti()
 
     def _solve_gauss_newton(self, u, p):
         """Gauss–Newton SQP: QP on JᵀJ, backtracking on the cost; returns
