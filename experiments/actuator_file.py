@@ -338,6 +338,11 @@ class ActuatorSpec:
         return inverse_feedforward_pid(hysteresis, gains, self.sample_period, self.input_bounds,
                                        preview=gains.preview, rate=self.input_rate)
 
+    def _estimator_noise(self) -> float:
+        """The sensor noise the NMPC's EKF and inverse-lmpc's Kalman filter are tuned for
+        (at least 0.1 % of the output range, so that a noise-free file still filters)."""
+        return max(self.noise, 1e-3 * (self.output_range[1] - self.output_range[0]))
+
     def build_nmpc(self, config: dict) -> NmpcController:
         """The NMPC on the smoothed model, EKF from the sensor noise, inverse warm start."""
         model: ActuatorModel = config["model"]
@@ -348,7 +353,7 @@ class ActuatorSpec:
                                     eps=smoothing.eps, direction_eps=smoothing.direction,
                                     delay_samples=model.dynamics.delay_samples, creep_order=creep_order)
         bounds = InputBounds(*self.input_bounds, self.input_rate)
-        noise = max(self.noise, 1e-3 * (self.output_range[1] - self.output_range[0]))
+        noise = self._estimator_noise()
         return NmpcController(pm, bounds, config["nmpc"], config["solver"], sensor_noise=noise)
 
     def build_inverse_lmpc(self, config: dict, settings: LinearMpcSettings | None = None) -> InverseLinearMpc:
@@ -359,7 +364,7 @@ class ActuatorSpec:
         model: ActuatorModel = config["model"]
         hysteresis, _ = self.hysteresis(model)
         linear = model.dynamics.virtual_input_model(self.sample_period)
-        noise = max(self.noise, 1e-3 * (self.output_range[1] - self.output_range[0]))
+        noise = self._estimator_noise()
         n_block = linear.nx - model.dynamics.delay_samples
         # as the NMPC's EKF (DisturbanceEKF.from_sensor_noise); the queue of virtual inputs is known exactly
         process = [(0.01 * noise) ** 2] * n_block + [1e-12 * noise**2] * model.dynamics.delay_samples + [noise**2]
