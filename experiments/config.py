@@ -20,6 +20,9 @@ MOVED = {
     "nmpc.rti_qp_iterations": "solver.rti.qp_iterations",
 }
 """Keys that moved to their own groups, and where to."""
+FOLLOWS = {"lmpc.horizon": "nmpc.horizon"}
+"""Keys that take the value of another when only that other is assigned: ``inverse-lmpc``
+predicts over the NMPC's horizon unless told otherwise (a fair comparison)."""
 OPTION = "<name>"
 """Stands for any option name in :func:`allowed_keys`."""
 
@@ -161,6 +164,11 @@ def apply_overrides(config: dict[str, Any], assignments: list[str], fixed: dict[
             raise ValueError(f"--set {key} cannot be changed on this bench: {fixed[key]}")
         group, *path = key.split(".")
         config[group] = _replace(config[group], path, text, key)
+    assigned = {assignment.split("=", 1)[0].strip() for assignment in assignments}
+    for key, leader in FOLLOWS.items():
+        group, field = key.split(".")
+        if leader in assigned and key not in assigned and group in config:
+            config[group] = dataclasses.replace(config[group], **{field: get_value(config, leader)})
     return config
 
 

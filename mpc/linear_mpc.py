@@ -50,7 +50,8 @@ class LinearMpcSettings:
     """The linear MPC of ``inverse-lmpc`` (``--set lmpc.KEY=VALUE``)."""
 
     horizon: int = 20
-    """Prediction (and control) horizon N in samples: the NMPC's, for a fair comparison."""
+    """Prediction (and control) horizon N in samples: the NMPC's, for a fair comparison
+    (``--set nmpc.horizon=N`` alone sets both)."""
     q_output: float = 1.0
     """Weight on the squared tracking error of each predicted output."""
     r_rate: float = 0.3

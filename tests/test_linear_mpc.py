@@ -93,3 +93,13 @@ def test_inverse_lmpc_is_offset_free_on_pam():
     run = bench.run("square-20", "inverse-lmpc", duration=4.5)
     settled = run.t > 3.5
     assert abs(np.mean(run.output[settled] - run.reference[settled])) < 0.1
+
+
+@pytest.mark.parametrize("bench_name", ["pam", "compliant", "reluctance", "dea"])
+def test_inverse_lmpc_predicts_over_the_nmpcs_horizon_unless_told_otherwise(bench_name):
+    bench = get_bench(bench_name)
+    assert bench.configure()["lmpc"].horizon == bench.configure()["nmpc"].horizon
+    assert bench.configure(["nmpc.horizon=13"])["lmpc"].horizon == 13
+    both = bench.configure(["lmpc.horizon=9", "nmpc.horizon=13"])
+    assert (both["lmpc"].horizon, both["nmpc"].horizon) == (9, 13)
+    assert bench.configure(["lmpc.horizon=9"])["nmpc"].horizon == bench.configure()["nmpc"].horizon
