@@ -42,6 +42,7 @@ from hystmpc.models.linear_dynamics import LinearDynamics
 from hystmpc.models.prediction import Smoothing, build_prediction_model
 from hystmpc.mpc import InputBounds, NmpcController, NmpcSettings, SolverSettings
 from hystmpc.mpc.linear_mpc import InverseLinearMpc, LinearMpcSettings
+from hystmpc.mpc.rti import user_cache_dir
 from hystmpc.plants.actuator import HysteresisActuator
 
 LOG = logging.getLogger("hystmpc")
@@ -281,8 +282,10 @@ class ActuatorSpec:
         span_u = self.input_bounds[1] - self.input_bounds[0]
         horizon = int(np.clip(self.dynamics.delay_samples + round(self._settling() / self.sample_period) + 2, 10, 40))
         config = {"plant": self.plant, "model": model,
+                  # runtime auto: the generated whole controller in the loop, as it would be flashed
+                  # (piezo example: 0.016 ms per step against 0.26 ms in Python, the same inputs)
                   "nmpc": NmpcSettings(horizon=horizon, q_output=(100 / span_y) ** 2,
-                                       r_rate=1e-3 * (100 / span_u) ** 2, solver="rti-c"),
+                                       r_rate=1e-3 * (100 / span_u) ** 2, solver="rti-c", runtime="auto"),
                   "smoothing": Smoothing(eps=5e-5 * span_u), "solver": SolverSettings(),
                   "pid": PidGains(), "inverse_ff_pid": FeedforwardPidGains(),
                   # the NMPC's horizon and weights, the rate weight on the virtual input (output units)
@@ -386,7 +389,7 @@ class ActuatorSpec:
         weight (:meth:`_tune_lmpc`).
 
         Tuning takes seconds to tens of seconds, so the result is kept in memory and on disk
-        (:func:`cache_dir`), keyed by everything it depends on.
+        (:func:`hystmpc.mpc.rti.user_cache_dir`), keyed by everything it depends on.
         """
         model = config["model"]
         key = repr(model)
@@ -402,7 +405,7 @@ class ActuatorSpec:
                                "output_range": self.output_range, "noise": self.noise,
                                "lmpc": dataclasses.asdict(config["lmpc"]), "lmpc_factors": LMPC_RATE_FACTORS},
                               sort_keys=True, default=str)
-        path = cache_dir() / f"tuning-{hashlib.sha256(identity.encode()).hexdigest()[:20]}.json"
+        path = user_cache_dir() / f"tuning-{hashlib.sha256(identity.encode()).hexdigest()[:20]}.json"
         try:
             stored = json.loads(path.read_text())
             return {"pid": PidGains(**stored["pid"]), "inverse_ff_pid": FeedforwardPidGains(**stored["inverse_ff_pid"]),
@@ -518,19 +521,12 @@ class ActuatorSpec:
         return Bench(name=self.name, description=self.description, paper="", output_name=self.output_name,
                      units=self.units, input_units=self.input_units, sample_period=self.sample_period,
                      scenarios=self.scenarios(), controllers=controllers, defaults=self.defaults,
+                     untuned_defaults=self._configured,
                      make_plant=self.make_plant, plant_groups=("plant", "model"), output_range=self.output_range,
                      input_bounds=self.input_bounds, input_rate=self.input_rate,
                      loop=("input", "hysteresis_output", f"input [{self.input_units}]",
                            f"hysteresis output [{self.units}]"),
                      default_scenario="sine", source=str(self.path))
-
-
-def cache_dir() -> Path:
-    """Where tuned gains are kept: ``$HYSTMPC_CACHE_DIR``, else ``$XDG_CACHE_HOME/hystmpc``
-    (``~/.cache/hystmpc``)."""
-    if os.environ.get("HYSTMPC_CACHE_DIR"):
-        return Path(os.environ["HYSTMPC_CACHE_DIR"])
-    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "hystmpc"
 
 
 def _kind(value) -> str | None:

@@ -78,6 +78,9 @@ class Bench:
     """Where the bench comes from when it is not built in: an actuator file's path, or a
     plugin's entry point (``module:attribute``); :func:`hystmpc.experiments.benches.get_bench`
     finds it again by this (sweep workers do)."""
+    untuned_defaults: Callable[[], dict[str, Any]] | None = None
+    """:attr:`defaults` before the baselines' gains are tuned (an actuator file: seconds to
+    minutes saved where no baseline runs, and where the settings are only checked)."""
 
     @property
     def guard(self) -> InputGuard:
@@ -90,10 +93,12 @@ class Bench:
         return Labels(self.output_name, self.units, self.input_units, self.loop, f"{self.name}: {self.description}",
                       self.sensor_units)
 
-    def configure(self, assignments=()) -> dict[str, Any]:
+    def configure(self, assignments=(), tuned: bool = True) -> dict[str, Any]:
         """The default configuration with ``KEY=VALUE`` assignments applied (``ValueError``
-        naming a bad or fixed key)."""
-        return apply_overrides(self.defaults(), list(assignments), self.fixed)
+        naming a bad or fixed key); ``tuned=False``: with :attr:`untuned_defaults` where the
+        bench has them (for the NMPC alone, or to check the settings)."""
+        defaults = self.defaults if tuned or self.untuned_defaults is None else self.untuned_defaults
+        return apply_overrides(defaults(), list(assignments), self.fixed)
 
     def _groups(self, config: dict[str, Any], groups: tuple[str, ...], who: str) -> dict[str, Any]:
         missing = [g for g in groups if g not in config]

@@ -317,8 +317,8 @@ def _positive_duration(value) -> None:
         raise UsageError(f"--duration must be a finite number of seconds > 0, got {value}")
 
 
-def _work_config(bench: Bench, overrides: list[str], force: bool):
-    config = _config(bench, overrides)
+def _work_config(bench: Bench, overrides: list[str], force: bool, tuned: bool = True):
+    config = _config(bench, overrides, tuned)
     try:
         check_horizons(config, force)
     except ValueError as exc:
@@ -351,7 +351,7 @@ def _codegen(args) -> int:
                          "--duration")
     if args.target not in (None, *CODEGEN_TARGETS):
         raise UsageError(f"--target {args.target!r} is unknown; allowed: {', '.join(CODEGEN_TARGETS)}")
-    config = _work_config(bench, args.overrides, args.force)
+    config = _work_config(bench, args.overrides, args.force, tuned=False)  # the NMPC alone
     _check_codegen_settings(bench, config)
     if args.target is not None and not _sets(args.overrides, "solver.rti.sensitivity_block"):
         from hystmpc.experiments.firmware import firmware_config
@@ -405,7 +405,7 @@ def _speed(args) -> int:
     from hystmpc.experiments.report import version
     bench = _bench(args.bench)
     _positive_duration(args.duration)
-    config = _work_config(bench, args.overrides, args.force)
+    config = _work_config(bench, args.overrides, args.force, tuned=False)  # the NMPC alone
     _check_codegen_settings(bench, config)
     if args.variants:
         variants = args.variants.split(",")
@@ -487,9 +487,9 @@ def _check_names(kind: str, names: list[str], allowed) -> None:
             raise UsageError(f"unknown {kind} {name!r}; allowed: {', '.join(allowed)}")
 
 
-def _config(bench: Bench, overrides: list[str]):
+def _config(bench: Bench, overrides: list[str], tuned: bool = True):
     try:
-        return bench.configure(overrides)
+        return bench.configure(overrides, tuned)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
 
@@ -515,10 +515,13 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
     _seed(args.seed)
     if args.reference is not None and len(scenario_names) > 1:
         raise UsageError("--reference replaces one scenario's reference: name one scenario at most")
-    config = _work_config(bench, args.overrides, args.force)
+    # checked before the baselines are tuned (an actuator file's first run tunes them for seconds to minutes)
+    config = _work_config(bench, args.overrides, args.force, tuned=False)
     if "nmpc" in controllers and "nmpc" in config:
+        from hystmpc.experiments.firmware import check_runtime
         try:
             config["nmpc"].check_combination(config.get("solver"))  # before any baseline runs
+            check_runtime(config)
         except ValueError as exc:
             raise UsageError(str(exc)) from None
     if args.reference is not None and not scenario_names:
@@ -547,6 +550,8 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
     out = Path(args.out) if args.out else _timestamped(Path("results") / bench.name)
     created = _output_folder(out, overwrite=args.overwrite)
     with _cleanup_on_error(out, created):
+        if any(c != "nmpc" for c in controllers):
+            config = _config(bench, args.overrides)
         runs = _run_all(args, bench, config, scenarios, controllers, out, total)
     doc = results_document(bench.name, runs, command=sys.argv[1:] if sys.argv else None)
     write_json(doc, out / "results.json")
@@ -621,6 +626,10 @@ def _run_all(args, bench: Bench, config, scenarios, controllers, out: Path, tota
     return runs
 
 
+TUNED_GROUPS = ("pid", "inverse_ff_pid", "lmpc")
+"""An actuator file's groups that its first run tunes (``list`` shows them untuned)."""
+
+
 def _list(args) -> int:
     from hystmpc.experiments.config import key_table
     info = {}
@@ -630,11 +639,13 @@ def _list(args) -> int:
             "description": bench.description, "paper": bench.paper, "units": bench.units,
             "input_units": bench.input_units, "sample_period_s": bench.sample_period,
             "input_bounds": list(bench.input_bounds), "scenarios": list(bench.scenarios),
-            "controllers": list(bench.controllers), "parameter_groups": list(bench.defaults())} | (
+            "controllers": list(bench.controllers), "parameter_groups": list(bench.configure(tuned=False))} | (
             {"source": bench.source} if bench.source else {})
-        if args.bench:
+        if args.bench:  # untuned: listing never waits for an actuator file's tuning
             info[bench.name]["keys"] = [{"key": k, "default": v, "doc": d}
-                                        for k, v, d in key_table(bench.configure())]
+                                        for k, v, d in key_table(bench.configure(tuned=False))]
+            if bench.untuned_defaults is not None:
+                info[bench.name]["tuned_at_first_run"] = TUNED_GROUPS
     if args.json:
         from hystmpc.experiments.report import json_safe
         print(json.dumps(json_safe({"benches": info, "solvers": list(SOLVERS), "families": list(FAMILY_NAMES)}),
@@ -653,6 +664,9 @@ def _list(args) -> int:
         width = max(len(k["key"]) for k in b["keys"])
         for k in b["keys"]:
             print(f"    {k['key']:<{width}}  {_show(k['default'])}" + (f"  — {k['doc']}" if k["doc"] else ""))
+        if "tuned_at_first_run" in b:
+            print(f"  {', '.join(g + '.*' for g in b['tuned_at_first_run'])}: the values before tuning; the first "
+                  "run or compare tunes the baselines on the nominal model (what you --set stays)")
     print(f"solvers (--set nmpc.solver=...): {', '.join(SOLVERS)}")
     print(f"model families (hystmpc identify FAMILY DATA.csv): {', '.join(FAMILY_NAMES)}")
     if not args.bench:
@@ -716,8 +730,20 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     return args
 
 
+def _one_blas_thread() -> None:
+    """BLAS on one thread, unless the user chose otherwise: every matrix here is small, and
+    on a loaded machine BLAS threads wait for each other (``identify`` on the piezo example
+    with two busy cores took 12.6 s, on one thread 4.6 s). Sweep workers inherit the setting."""
+    if "OPENBLAS_NUM_THREADS" in os.environ or "MKL_NUM_THREADS" in os.environ:
+        return
+    os.environ["OPENBLAS_NUM_THREADS"] = os.environ["MKL_NUM_THREADS"] = "1"
+    from threadpoolctl import threadpool_limits
+    threadpool_limits(1, user_api="blas")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code."""
+    _one_blas_thread()
     try:
         args = _parse(sys.argv[1:] if argv is None else argv)
         _log_notices(not getattr(args, "quiet", False))

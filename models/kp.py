@@ -177,8 +177,13 @@ class KrasnoselskiiPokrovskii(SteppedModel):
         Moves the input up (or down) from ``u_last`` in steps of ``step`` until the model
         output reaches ``y_target``, then refines within the last step by bisection; returns
         the bound when the target is beyond what the range can reach. ``weights`` as in
-        :meth:`step`.
+        :meth:`step`. On CasADi expressions (a generated controller) :meth:`bisection_inverse`,
+        with the model's own weights.
         """
+        if symbolic(state) or symbolic(y_target):
+            if weights is not None:
+                raise ValueError("the symbolic inverse uses the model's own weights; weights must stay None")
+            return self.bisection_inverse(state, y_target, u_min, u_max)
         if not np.isfinite(y_target):
             raise ValueError(f"y_target must be finite, got {y_target}")
         u_last = float(np.clip(state[0], u_min, u_max))

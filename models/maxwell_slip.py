@@ -122,10 +122,38 @@ class MaxwellSlip(SteppedModel):
         The output is monotone and piecewise linear in ``u`` along a monotone input path, so
         the inverse is exact. Targets outside ``(-Σw, Σw)`` are unreachable: ``ValueError``.
         """
+        if symbolic(state) or symbolic(y_target):
+            return self.symbolic_inverse_step(state, y_target)
         sat = self.saturation
         if not (np.isfinite(y_target) and -sat < y_target < sat):
             raise ValueError(f"y_target={y_target} is outside the reachable range (-{sat}, {sat})")
         return self.move_to(state, y_target, lambda u, forces: float(forces.sum()), tail_slope=0.0)
+
+    def symbolic_inverse_step(self, state, y_target):
+        """:meth:`inverse_step` on CasADi expressions, without branches or loops over the elements.
+
+        Moving the input by ``δ >= 0`` towards the target, the output changes at the rate
+        ``Σ k_i`` over the elements not yet at their break-away force, which only falls: the
+        output is concave in ``δ`` and lies below each of its supporting lines, the one at
+        ``δ = 0`` and the one at each element's break point. So the ``δ`` that reaches the
+        target is the largest of the rising lines' crossings. A target outside ``(−Σw, Σw)``
+        gives a NaN input (the NumPy steps raise ``ValueError``).
+        """
+        k, w = ca.DM(self.k), ca.DM(self.w)
+        u0, forces = state[0], state[1:]
+        y0 = ca.sum1(forces)
+        sign = ca.if_else(y_target >= y0, 1.0, -1.0)
+        breaks = ca.fmax((w - sign * forces) / k, 0.0)  # input distance until each element slides
+
+        def crossing(at, y_at, slope):
+            return ca.if_else(slope > 0, at + sign * (y_target - y_at) / slope, -ca.inf)
+        delta = crossing(0.0, y0, ca.dot(k, breaks > 0))
+        for i in range(self.n_elements):
+            y_i = ca.sum1(clip(forces + sign * k * breaks[i], -w, w))
+            delta = ca.fmax(delta, crossing(breaks[i], y_i, ca.dot(k, breaks > breaks[i])))
+        reachable = ca.logic_and(y_target > -self.saturation, y_target < self.saturation)
+        u = ca.if_else(reachable, u0 + sign * ca.if_else(y_target == y0, 0.0, delta), np.nan)
+        return self.step(state, u)[0], u
 
     def move_to(self, state, y_target: float, output_of, tail_slope: float) -> tuple[np.ndarray, float]:
         """The monotone input move from ``state`` after which ``output_of(u, forces)`` is ``y_target``.

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from hystmpc.models.base import SteppedModel, check_smoothing, smooth_function, symbolic
+from hystmpc.models.base import SteppedModel, check_smoothing, clip, smooth_function, symbolic
 from hystmpc.models.maxwell_slip import MaxwellSlip
 
 
@@ -109,7 +109,10 @@ class PrandtlIshlinskii(SteppedModel):
 
     def inverse_step(self, state, y_target: float) -> tuple[np.ndarray, float]:
         """The input that brings the output to ``y_target`` from ``state`` (exact: the output
-        is piecewise linear and monotone along a monotone input path), and the new state."""
+        is piecewise linear and monotone along a monotone input path), and the new state.
+        On CasADi expressions (a generated controller) :meth:`symbolic_inverse_step`."""
+        if symbolic(state) or symbolic(y_target):
+            return self.symbolic_inverse_step(state, y_target)
         if not np.isfinite(y_target):
             raise ValueError(f"y_target must be finite, got {y_target}")
         if not self.weights:
@@ -117,3 +120,35 @@ class PrandtlIshlinskii(SteppedModel):
             return np.array([u]), u
         return self.elements.move_to(state, y_target, lambda u, forces: self.gain * u - float(forces.sum()),
                                      tail_slope=self.gain)
+
+    def symbolic_inverse_step(self, state, y_target):
+        """:meth:`inverse_step` on CasADi expressions, without branches or loops over the plays.
+
+        Moving the input by ``δ >= 0`` towards the target, the output changes at the rate
+        ``p0 + Σ p_i`` over the plays already dragged along, which only grows: the output is
+        convex in ``δ`` and lies above each of its supporting lines, the one at ``δ = 0`` and
+        the one at each play's break point ``b_i``. So the ``δ`` that reaches the target is the
+        smallest of the lines' own crossings (a line with no slope never crosses). The same
+        input as the NumPy steps to rounding; ``O(n²)`` operations for ``n`` plays.
+        """
+        if not self.weights:
+            u = y_target / self.linear_gain
+            return ca.vertcat(u), u
+        p = ca.DM(self.weights)
+        w = ca.DM([pi * r for pi, r in zip(self.weights, self.thresholds, strict=True)])
+        u0, forces = state[0], state[1:]
+        y0 = self.gain * u0 - ca.sum1(forces)
+        sign = ca.if_else(y_target >= y0, 1.0, -1.0)
+        breaks = ca.fmax((w - sign * forces) / p, 0.0)  # input distance until each play is dragged
+
+        def output_after(delta):
+            return self.gain * (u0 + sign * delta) - ca.sum1(clip(forces + sign * p * delta, -w, w))
+
+        def crossing(at, y_at, slope):
+            return ca.if_else(slope > 0, at + sign * (y_target - y_at) / slope, ca.inf)
+        delta = crossing(0.0, y0, self.linear_gain + ca.dot(p, breaks <= 0))
+        for i in range(len(self.weights)):
+            delta = ca.fmin(delta, crossing(breaks[i], output_after(breaks[i]),
+                                            self.linear_gain + ca.dot(p, breaks <= breaks[i])))
+        u = u0 + sign * ca.if_else(y_target == y0, 0.0, delta)
+        return self.step(state, u)[0], u

@@ -45,7 +45,8 @@ class Scaled(SteppedModel):
     def step(self, state, u: float) -> tuple[np.ndarray, float]:
         """Exact step; returns ``(state, gain · y_inner)``."""
         state, y = self.inner.step(state, u)
-        return state, float(self.gain * y)
+        y = self.gain * y
+        return state, y if symbolic(y) else float(y)
 
     def smooth_step(self, eps: float, direction_eps: float | None = None) -> ca.Function:
         """The inner smooth step with its output scaled."""
@@ -58,4 +59,4 @@ class Scaled(SteppedModel):
 
     def inverse_step(self, state, y_target: float) -> tuple[np.ndarray, float]:
         """The inner inverse of ``y_target / gain``."""
-        return self.inner.inverse_step(state, float(y_target) / self.gain)
+        return self.inner.inverse_step(state, (y_target if symbolic(y_target) else float(y_target)) / self.gain)

@@ -180,8 +180,17 @@ def _constraint_violation(Cx, l_mx, u_mx, lower, upper):
 
 
 def cache_dir() -> Path:
-    """Where compiled solvers are kept (``HYSTMPC_CACHE`` or ``~/.cache/hystmpc``)."""
-    return Path(os.environ.get("HYSTMPC_CACHE", Path.home() / ".cache" / "hystmpc"))
+    """Where compiled solvers and controllers are kept: ``$HYSTMPC_CACHE`` (compiled code
+    only), else :func:`user_cache_dir`."""
+    return Path(os.environ.get("HYSTMPC_CACHE") or user_cache_dir())
+
+
+def user_cache_dir() -> Path:
+    """hystmpc's cache: ``$HYSTMPC_CACHE_DIR``, else ``$XDG_CACHE_HOME/hystmpc``
+    (``~/.cache/hystmpc``)."""
+    if os.environ.get("HYSTMPC_CACHE_DIR"):
+        return Path(os.environ["HYSTMPC_CACHE_DIR"])
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "hystmpc"
 
 
 COMPILE_FLAGS = ("-O2", "-ffp-contract=off")

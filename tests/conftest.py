@@ -23,6 +23,10 @@ def reversing_input():
 
 @pytest.fixture(scope="session", autouse=True)
 def private_cache(tmp_path_factory):
-    """Tuned baseline gains are cached on disk; the tests use their own cache, fresh per session."""
+    """Tuned baseline gains are cached on disk; the tests use their own cache, fresh per session.
+    Compiled solvers stay where they were (they depend on nothing a test changes)."""
     import os
+
+    from hystmpc.mpc.rti import cache_dir
+    os.environ["HYSTMPC_CACHE"] = str(cache_dir())
     os.environ["HYSTMPC_CACHE_DIR"] = str(tmp_path_factory.mktemp("cache"))

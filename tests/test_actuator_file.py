@@ -128,6 +128,7 @@ def test_sweep_codegen_and_speed_take_an_actuator_file(piezo, tmp_path):
     assert main(["codegen", str(piezo / "piezo.toml"), "--verify", "--duration", "0.1", "--out",
                  str(tmp_path / "c"), "--json", str(report), "--quiet"]) == 0
     assert json.loads(report.read_text())["max_input_difference"] == 0.0
+    assert (tmp_path / "c" / "controller" / "piezo_stage.h").exists()  # the whole controller, inverse included
     assert main(["speed", str(piezo / "piezo.toml"), "--variants", "rti", "--duration", "0.1", "--out",
                  str(tmp_path / "speed"), "--quiet"]) == 0
 

@@ -170,6 +170,28 @@ def test_inverse_step_reaches_each_target_and_returns_the_state_after_it(case):
         state = new_state
 
 
+def test_symbolic_step_and_inverse_repeat_the_numpy_ones(case):
+    """A generated controller runs the exact step and the inverse on CasADi expressions
+    (the inverse warm start and the fallback): the same states and inputs as NumPy's."""
+    model = case.model
+    x, v = ca.SX.sym("state", len(model.state_names)), ca.SX.sym("v")
+    step = ca.Function("step", [x, v], list(model.step(x, v)))
+    inverse = ca.Function("inverse", [x, v], list(model.inverse_step(x, v)))
+    state = model.initial_state(case.inputs[0])
+    for u in case.inputs[1:60]:
+        expected, y = model.step(state, u)
+        got, y_got = (np.asarray(value, float).ravel() for value in step(state, u))
+        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12)
+        assert y_got[0] == pytest.approx(y, abs=1e-12)
+        state = expected
+    for target in case.targets[:60]:
+        expected, u = model.inverse_step(state, float(target))
+        got, u_got = (np.asarray(value, float).ravel() for value in inverse(state, target))
+        assert u_got[0] == pytest.approx(u, abs=1e-9 * (1 + abs(u)))
+        assert np.all(np.abs(got - expected) <= 1e-9 * (1 + np.abs(expected))), (got, expected)
+        state = expected
+
+
 def test_state_goes_in_and_comes_out(case):
     model = case.model
     state = model.initial_state(case.inputs[0])
