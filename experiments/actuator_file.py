@@ -25,6 +25,7 @@ import hashlib
 import json
 import logging
 import os
+import re
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -163,6 +164,8 @@ class ActuatorSpec:
         self.raw = raw
         where = f"actuator file {path}"
         self.name = self._text(raw, "name", None)
+        if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]*", self.name):  # it names the results folder
+            raise self._fail("name", f"must be letters, digits, '.', '_' or '-' (a folder name), got {self.name!r}")
         self.description = self._text(raw, "description", f"your actuator ({self.path.name})")
         self.output_name = self._text(raw, "output_name", "output")
         self.units = self._text(raw, "units", "")
@@ -177,8 +180,13 @@ class ActuatorSpec:
         model_file = (self.path.parent / str(model["file"])).resolve()
         try:
             self.identified = read_model_document(model_file, self.sample_period)
+            fitted_at = json.loads(model_file.read_text()).get("sample_period_s")
         except ValueError as exc:
             raise ValueError(f"{where}: model.file: {exc}") from None
+        if isinstance(fitted_at, int | float) and not np.isclose(fitted_at, self.sample_period, rtol=1e-9, atol=0):
+            raise self._fail("sample_period", f"= {self.sample_period:g} s differs from the {fitted_at:g} s the model "
+                             f"was identified at ({model_file.name}): its dead time and creep count those samples; "
+                             f"set sample_period = {fitted_at:g} or identify at the control rate")
         self.family = self.identified.family
         self.dynamics = self.identified.dynamics
         if "dynamics" in raw:

@@ -41,7 +41,7 @@ def load_reference(path: str | Path, bench: Bench) -> Scenario:
 
 def _header(path: Path, what: str) -> list[str]:
     try:
-        with path.open(newline="") as fh:
+        with path.open(newline="", encoding="utf-8-sig") as fh:
             first = next(csv.reader(fh), None)
     except FileNotFoundError:
         raise ValueError(f"{what} {str(path)!r} does not exist") from None
@@ -67,7 +67,7 @@ def read_columns(path: str | Path, columns: tuple[str, ...], what: str, minimum_
                          f"has {header}")
     index = [header.index(c) for c in columns]
     try:
-        with path.open(newline="") as fh:
+        with path.open(newline="", encoding="utf-8-sig") as fh:
             rows = list(csv.reader(fh))[1:]
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise ValueError(f"{what} {str(path)!r} cannot be read as CSV text ({type(exc).__name__})") from None

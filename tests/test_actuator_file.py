@@ -153,6 +153,8 @@ GOOD = (EXAMPLE / "piezo.toml").read_text()
     (GOOD.replace("[sensor]", '[nmpc]\nhorizon = "20"\n[sensor]'), "nmpc.horizon = '20': expected a number"),
     (GOOD.replace("[sensor]", "[nmpc]\npreview = 1\n[sensor]"), "nmpc.preview = 1: expected true or false"),
     ("name = 'x'\n[model\n", "not valid TOML"),
+    (GOOD.replace('name = "piezo-stage"', 'name = "../../elsewhere"'), "name must be letters, digits"),
+    (GOOD.replace("sample_period = 0.001", "sample_period = 0.002"), "differs from the 0.001 s the model"),
 ])
 def test_malformed_actuator_files_exit_2_naming_the_key(piezo, capsys, text, needle):
     assert main(["list", _actuator(piezo, text)]) == 2

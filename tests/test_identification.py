@@ -178,6 +178,21 @@ def test_identify_command_writes_model_figure_and_validation(tmp_path, capsys):
     assert out.with_suffix(".png").stat().st_size > 10_000
 
 
+def test_a_spreadsheets_byte_order_mark_is_read_and_a_poor_fit_is_said(tmp_path, capsys):
+    """Excel writes UTF-8 with a byte-order mark; a sensor offset makes the fit poor (a warning)."""
+    truth = PrandtlIshlinskii(0.05, tuple(_grid(0, 100)[[2, 6]]), (0.04, 0.02))
+    u = fit_input(0, 100)
+    y = measured(truth, 0.0, u, 0.01, 1)
+    good = _write(tmp_path / "good.csv", np.arange(len(u)) * DT, u, y)
+    good.write_bytes(b"\xef\xbb\xbf" + good.read_bytes())
+    assert main(["identify", "prandtl-ishlinskii", str(good), "--out", str(tmp_path / "a.json"), "--no-plots"]) == 0
+    assert "poor fit" not in capsys.readouterr().err
+    offset = _write(tmp_path / "offset.csv", np.arange(len(u)) * DT, u, y + np.ptp(y))
+    assert main(["identify", "prandtl-ishlinskii", str(offset), "--out", str(tmp_path / "b.json"), "--no-plots",
+                 "--quiet"]) == 0
+    assert "poor fit: RMSE" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("rows, needle", [
     ("t,u,y\n" + "".join(f"{k * 1e-3},{k},{k}\n" for k in range(10)), "needs at least 50 rows"),
     ("t,u,y\n" + "".join(f"{k * 1e-3 if k != 30 else 0.0305},{k % 7},{k}\n" for k in range(100)),
