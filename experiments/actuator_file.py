@@ -174,6 +174,11 @@ class ActuatorSpec:
         self.input_bounds = self._pair(raw, "input_bounds")
         self.output_range = self._pair(raw, "output_range")
         self.input_rate = self._number(raw, "input_rate", np.inf, positive=True)
+        span = self.input_bounds[1] - self.input_bounds[0]
+        if np.isfinite(self.input_rate) and self.input_rate >= span:
+            raise self._fail("input_rate", f"= {self.input_rate:g} is per sample and spans the whole input range "
+                             f"({span:g}), so it limits nothing; give the change per sample (per second × "
+                             f"sample_period), or leave it out for no limit")
         model = raw.get("model", {})
         if "file" not in model:
             raise ValueError(f"{where}: missing key 'model.file' (the hystmpc.model/1 document)")
@@ -199,6 +204,9 @@ class ActuatorSpec:
         self.plant = ActuatorPlant(self._number(plant, "mismatch", 0.05, key="plant.mismatch"), seed, self.noise)
         scen = raw.get("scenarios", {})
         self.sine_hz = self._number(scen, "sine_hz", self._default_sine_hz(), positive=True, key="scenarios.sine_hz")
+        if self.sine_hz >= 0.25 / self.sample_period:
+            raise self._fail("scenarios.sine_hz", f"= {self.sine_hz:g} Hz leaves fewer than 4 samples per period; "
+                             f"allowed: below {0.25 / self.sample_period:g} Hz at this sample_period")
         self.step_s = self._number(scen, "step_s", 0.5 / self.sine_hz, positive=True, key="scenarios.step_s")
         self.duration_s = self._number(scen, "duration_s", 4.5 / self.sine_hz, positive=True,
                                        key="scenarios.duration_s")
