@@ -185,9 +185,16 @@ class ActuatorSpec:
         model_file = (self.path.parent / str(model["file"])).resolve()
         try:
             self.identified = read_model_document(model_file, self.sample_period)
-            fitted_at = json.loads(model_file.read_text()).get("sample_period_s")
+            document = json.loads(model_file.read_text())
         except ValueError as exc:
             raise ValueError(f"{where}: model.file: {exc}") from None
+        fitted_at = document.get("sample_period_s")
+        fitted_units = document.get("units") if isinstance(document.get("units"), dict) else {}
+        for key, mine, theirs in (("units", self.units, fitted_units.get("y")),
+                                  ("input_units", self.input_units, fitted_units.get("u"))):
+            if mine and isinstance(theirs, str) and theirs and mine != theirs:
+                raise self._fail(key, f"= {mine!r} differs from the model's {theirs!r} ({model_file.name}): its "
+                                 f"parameters are in its units; write {key} = {theirs!r}, or identify in {mine!r}")
         if isinstance(fitted_at, int | float) and not np.isclose(fitted_at, self.sample_period, rtol=1e-9, atol=0):
             raise self._fail("sample_period", f"= {self.sample_period:g} s differs from the {fitted_at:g} s the model "
                              f"was identified at ({model_file.name}): its dead time and creep count those samples; "

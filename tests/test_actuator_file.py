@@ -155,6 +155,7 @@ GOOD = (EXAMPLE / "piezo.toml").read_text()
     ("name = 'x'\n[model\n", "not valid TOML"),
     (GOOD.replace('name = "piezo-stage"', 'name = "../../elsewhere"'), "name must be letters, digits"),
     (GOOD.replace("sample_period = 0.001", "sample_period = 0.002"), "differs from the 0.001 s the model"),
+    (GOOD.replace('units = "um"', 'units = "mm"'), "units = 'mm' differs from the model's 'um'"),
     (GOOD.replace("input_rate = 20.0", "input_rate = 5000.0"),
      "input_rate = 5000 is per sample"),
     (GOOD + "\n[scenarios]\nsine_hz = 400.0\n", "scenarios.sine_hz = 400 Hz leaves fewer than 4 samples"),
