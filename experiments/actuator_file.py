@@ -208,7 +208,10 @@ class ActuatorSpec:
         seed = plant.get("seed", 0)
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
             raise self._fail("plant.seed", f"must be an integer >= 0, got {seed!r}")
-        self.plant = ActuatorPlant(self._number(plant, "mismatch", 0.05, key="plant.mismatch"), seed, self.noise)
+        try:
+            self.plant = ActuatorPlant(self._number(plant, "mismatch", 0.05, key="plant.mismatch"), seed, self.noise)
+        except ValueError as exc:
+            raise ValueError(f"{where}: [plant] {exc}") from None
         scen = raw.get("scenarios", {})
         self.sine_hz = self._number(scen, "sine_hz", self._default_sine_hz(), positive=True, key="scenarios.sine_hz")
         if self.sine_hz >= 0.25 / self.sample_period:
