@@ -509,6 +509,17 @@ def check_runtime(config: dict) -> None:
         raise ValueError(f"nmpc.runtime=c needs a C compiler ({_no_compiler()}); set nmpc.runtime=python or auto")
 
 
+_SAID: set[str] = set()
+
+
+def _say_once(notice: str) -> None:
+    """A notice of ``nmpc.runtime=auto``, once per process (not once per scenario)."""
+    from hystmpc.mpc.rti import LOG
+    if notice not in _SAID:
+        _SAID.add(notice)
+        LOG.warning(notice)
+
+
 STALE_BUILD_S = 3600.0
 """A build folder left this long under ``<cache>/controllers/`` (a killed build) is removed."""
 
@@ -535,7 +546,7 @@ def compiled_controller(bench: Bench, config: dict):
     def in_python():  # runtime=auto where the C controller cannot run: the user's solver, in Python
         return bench.build_controller("nmpc", {**config, "nmpc": replace(config["nmpc"], runtime="python")})
     if cc is None:  # runtime=auto: check_runtime refuses runtime=c without a compiler
-        LOG.warning(f"no C compiler ({_no_compiler()}): nmpc.runtime=auto runs the controller in Python, slower")
+        _say_once(f"no C compiler ({_no_compiler()}): nmpc.runtime=auto runs the controller in Python, slower")
         return in_python()
     python = bench.build_controller("nmpc", controller_config(bench, config))
     name = "controller"
@@ -546,7 +557,7 @@ def compiled_controller(bench: Bench, config: dict):
             write_controller(bench, config, written, name, build=False)
         except NotGeneratable as exc:
             if config["nmpc"].runtime == "auto":
-                LOG.warning(f"{exc}: nmpc.runtime=auto runs the controller in Python")
+                _say_once(f"{exc}: nmpc.runtime=auto runs the controller in Python")
                 return in_python()
             raise ValueError(f"nmpc.runtime=c: {exc}; or set nmpc.runtime=python or auto") from None
         include, libraries = library_flags((written / f"{name}_nmpc.c").read_text())

@@ -289,10 +289,12 @@ def test_runtime_auto_runs_the_generated_controller_where_it_can(tmp_path, monke
     """``nmpc.runtime=auto`` (reluctance's default): the generated controller with an RTI
     solver and a C compiler; the Python controller with another solver, and without a
     compiler after a notice, where ``runtime=c`` is refused."""
+    from hystmpc.experiments import firmware
     from hystmpc.mpc.rti import c_compiler
     if c_compiler() is None:
         pytest.skip("no C compiler")
     monkeypatch.setenv("HYSTMPC_CACHE", str(tmp_path))
+    monkeypatch.setattr(firmware, "_SAID", set())  # each notice is said once per process
     bench = get_bench("reluctance")
     assert bench.configure()["nmpc"].runtime == "auto"
     assert type(bench.build_controller("nmpc", bench.configure())).__name__ == "CompiledController"
