@@ -38,7 +38,7 @@ from hystmpc.experiments.bench import Bench, ControllerSpec
 from hystmpc.experiments.config import apply_overrides, get_value
 from hystmpc.experiments.runner import Scenario
 from hystmpc.models.document import dynamics_from, read_model_document
-from hystmpc.models.identification import FAMILIES
+from hystmpc.models.identification import FAMILIES, hysteresis_output
 from hystmpc.models.linear_dynamics import LinearDynamics
 from hystmpc.models.prediction import Smoothing, build_prediction_model
 from hystmpc.mpc import InputBounds, NmpcController, NmpcSettings, SolverSettings
@@ -47,6 +47,8 @@ from hystmpc.mpc.rti import user_cache_dir
 from hystmpc.plants.actuator import HysteresisActuator
 
 LOG = logging.getLogger("hystmpc")
+_WARNED: set[str] = set()
+"""Actuator files whose output range was already said to exceed the model's reach."""
 TUNING_RULE = "mean-rmse-nelder-mead/6"
 """Names the tuning rule in the cache key: change it when the rule changes."""
 LMPC_RATE_FACTORS = (0.01, 0.1, 1.0, 10.0, 100.0, 1e3, 1e4)
@@ -220,6 +222,7 @@ class ActuatorSpec:
         self.step_s = self._number(scen, "step_s", 0.5 / self.sine_hz, positive=True, key="scenarios.step_s")
         self.duration_s = self._number(scen, "duration_s", 4.5 / self.sine_hz, positive=True,
                                        key="scenarios.duration_s")
+        self._warn_beyond_reach()
         self._table_values = [(f"{group}.{key}", value) for group in GROUP_TABLES
                               for key, value in _flatten(raw.get(group, {}))]
         self.overrides = [f"{key}={value}" for key, value in self._table_values]
@@ -248,6 +251,24 @@ class ActuatorSpec:
                         raise ValueError(f"actuator file {self.path}: unknown key '{key}.{sub}'; allowed in "
                                          f"[{key}]: {', '.join(sorted(TABLES[key]))}")
         return raw
+
+    def _warn_beyond_reach(self) -> None:
+        """A warning (once per file and process) when ``output_range`` reaches well beyond
+        the model's output over a major loop of the input bounds: references there cannot be
+        tracked, by any controller."""
+        model, creep_order = self.identified.hysteresis()
+        lo, hi = self.input_bounds
+        loop = np.concatenate((np.linspace(lo, hi, 200), np.linspace(hi, lo, 200)))
+        h = hysteresis_output(model, creep_order, loop, self.sample_period)
+        reach_lo, reach_hi = float(np.min(h)), float(np.max(h))
+        margin = 0.05 * (reach_hi - reach_lo)
+        if (self.output_range[0] >= reach_lo - margin and self.output_range[1] <= reach_hi + margin) \
+                or str(self.path) in _WARNED:
+            return
+        _WARNED.add(str(self.path))
+        LOG.warning(f"actuator file {self.path}: output_range [{self.output_range[0]:g}, {self.output_range[1]:g}] "
+                    f"reaches beyond the model's [{reach_lo:.4g}, {reach_hi:.4g}] {self.units} over input_bounds: "
+                    "the scenarios' references there cannot be tracked")
 
     def _fail(self, key: str, message: str) -> ValueError:
         return ValueError(f"actuator file {self.path}: {key} {message}")

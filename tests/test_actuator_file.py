@@ -164,3 +164,11 @@ def test_malformed_actuator_files_exit_2_naming_the_key(piezo, capsys, text, nee
     assert main(["list", _actuator(piezo, text)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and needle in err, err
+
+
+def test_an_output_range_beyond_the_models_reach_is_said(piezo, capsys):
+    assert main(["list", _actuator(piezo, GOOD)]) == 0
+    assert "reaches beyond" not in capsys.readouterr().err
+    far = GOOD.replace("output_range = [0.0, 8.5]", "output_range = [0.0, 500.0]")
+    assert main(["list", _actuator(piezo, far)]) == 0
+    assert "output_range [0, 500] reaches beyond the model's" in capsys.readouterr().err
