@@ -65,7 +65,7 @@ def _number(text: str) -> Any:
     return text.strip()
 
 
-def _parse(text: str, current: Any, key: str) -> Any:
+def _parse(text: str, current: Any, key: str, infinite_ok: bool = False) -> Any:
     if isinstance(current, bool):
         lowered = text.strip().lower()
         if lowered in ("true", "1", "yes"):
@@ -78,7 +78,7 @@ def _parse(text: str, current: Any, key: str) -> Any:
             return int(text)
         if isinstance(current, float):
             value = float(text)
-            if value != value or value in (float("inf"), float("-inf")):
+            if value != value or value == float("-inf") or (value == float("inf") and not infinite_ok):
                 raise ValueError
             return value
         if isinstance(current, tuple):
@@ -98,7 +98,8 @@ def _parse(text: str, current: Any, key: str) -> Any:
         elif isinstance(current, tuple):
             kind = f"{len(current)} comma-separated numbers"
         else:
-            kind = "an integer" if isinstance(current, int) else "a finite number"
+            kind = ("an integer" if isinstance(current, int) else "a number or inf" if infinite_ok
+                    else "a finite number")
         raise ValueError(f"--set {key}={text!r}: expected {kind}") from None
     return text
 
@@ -128,8 +129,9 @@ def _replace(obj, path: list[str], text: str, key: str):
         new = {**value, ".".join(rest): _number(text)}
     elif rest:
         new = _replace(value, rest, text, key)
-    else:
-        new = _parse(text, value, key)
+    else:  # inf where the setting's own default is inf (it means "none")
+        default = next((f.default for f in dataclasses.fields(obj) if f.name == name), None)
+        new = _parse(text, value, key, infinite_ok=isinstance(default, float) and default == float("inf"))
     try:
         return dataclasses.replace(obj, **{name: new})
     except ValueError as exc:

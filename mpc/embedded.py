@@ -329,16 +329,28 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     u_ff = u_inv if s.r_input > 0 else ca.DM.zeros(N)
     p = ca.vertcat(condition, u_last, refs, u_ff)
 
+    settings = controller.solvers.rti
+    extra_step = _extra_rti_step(problem.rti, N, p.numel()) if np.isfinite(settings.extra_step_tolerance) else None
+
     def rti_steps(guess):
-        """The RTI steps from ``guess`` made feasible: the last iterate, and whether they succeeded."""
+        """The RTI steps from ``guess`` made feasible (as :func:`hystmpc.mpc.rti.rti_steps`): the
+        last iterate, and whether they succeeded."""
         w = feasible_guess_expr(guess, u_last, u_min, u_max, rate)
-        worst, broken = ca.MX(0), ca.MX(0)
-        for _ in range(controller.solvers.rti.iterations):
-            w_next, qp_error = problem.rti(w, p)
+        worst, broken, moved = ca.MX(0), ca.MX(0), ca.MX(0)
+
+        def take(w, step):
+            nonlocal worst, broken, moved
+            w_next, qp_error = step
             worst = ca.if_else(qp_error <= worst, worst, qp_error)  # as rti_steps: a NaN error replaces the worst
             finite = _finite(w_next)
             broken = ca.logic_or(broken, ca.logic_not(finite))
-            w = ca.if_else(finite, w_next, w)  # a non-finite step is a failure; the next QP gets finite data
+            moved = ca.mmax(ca.fabs(w_next - w))
+            return ca.if_else(finite, w_next, w)  # a non-finite step is a failure; the next QP gets finite data
+
+        for _ in range(settings.iterations):
+            w = take(w, problem.rti(w, p))
+        if extra_step is not None:
+            w = take(w, extra_step(ca.logic_and(ca.logic_not(broken), moved > settings.extra_step_tolerance), w, p))
         return w, ca.logic_and(ca.logic_and(ca.logic_not(lost), ca.logic_not(broken)), worst <= QP_TOLERANCE)
 
     w, success = rti_steps(u_guess)
@@ -369,6 +381,14 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     feedback = ca.Function(f"{name}_feedback", [mem, z, window], [mem_next, u, status, predicted],
                            ["mem", "z", "ref_preview"], ["mem_next", "u", "status", "predicted"])
     return feedback, prepare, layout
+
+
+def _extra_rti_step(rti: ca.Function, N: int, n_p: int) -> ca.Function:
+    """``step(needed, w, p)``: ``rti(w, p)`` where ``needed``, else ``(w, 0)``, through a switch,
+    so that generated code takes the step only on the samples that need it."""
+    w, p = ca.MX.sym("w", N), ca.MX.sym("p", n_p)
+    skip = ca.Function("no_extra_rti_step", [w, p], [w, ca.MX(0)])
+    return ca.Function.if_else("extra_rti_step_if_needed", ca.Function("extra_rti_step", [w, p], list(rti(w, p))), skip)
 
 
 def _inverse_plan(controller, est: Estimate, refs, u_last, N: int):

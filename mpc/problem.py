@@ -122,10 +122,11 @@ class TrackingProblem:
             self.rti_cost = compiled_or_in_process(self.rti_cost)[0]
 
     def _solve_rti(self, w0, p, finish) -> Solution:
-        """``rti.iterations`` RTI steps from ``w0``; ``finish(w, finite)`` -> (u_plan, x_plan)."""
-        iterations = self.solvers.rti.iterations
+        """``rti.iterations`` RTI steps from ``w0`` (one more if the last did not settle);
+        ``finish(w, finite)`` -> (u_plan, x_plan)."""
+        rti = self.solvers.rti
         start = time.perf_counter()
-        w, qp_error = rti_steps(self.rti, w0, p, iterations)
+        w, qp_error, iterations = rti_steps(self.rti, w0, p, rti.iterations, rti.extra_step_tolerance)
         finite = bool(np.all(np.isfinite(w)))
         cost = float("nan")
         if self.settings.multistart and self.rti_cost is not None and finite:  # the cost picks between two plans

@@ -326,16 +326,21 @@ def feasible_guess(u_guess, u_prev: float, u_min: float, u_max: float, du_max: f
     return u
 
 
-def rti_steps(rti: ca.Function, w0, p, iterations: int) -> tuple[np.ndarray, float]:
-    """``iterations`` RTI steps from ``w0``; returns the last iterate and the worst ``qp_error``
-    (NaN if any was; infinite when an iterate is not finite, which ends the steps: an
-    in-process QP refuses NaN bounds)."""
+def rti_steps(rti: ca.Function, w0, p, iterations: int,
+              extra_step_tolerance: float = np.inf) -> tuple[np.ndarray, float, int]:
+    """``iterations`` RTI steps from ``w0``, and one more when the last moved an entry of the
+    iterate by more than ``extra_step_tolerance``; returns the last iterate, the worst
+    ``qp_error`` (NaN if any was; infinite when an iterate is not finite, which ends the steps:
+    an in-process QP refuses NaN bounds) and the steps taken."""
     w, worst = np.asarray(w0, float), 0.0
-    for _ in range(iterations):
+    taken, moved = 0, np.inf
+    while taken < iterations or (taken == iterations and moved > extra_step_tolerance):
         w_next, qp_error = rti(w, p)
-        w, qp_error = np.asarray(w_next).ravel(), float(qp_error)
+        w_next, qp_error = np.asarray(w_next).ravel(), float(qp_error)
+        moved = float(np.max(np.abs(w_next - w), initial=0.0))
+        w, taken = w_next, taken + 1
         if not qp_error <= worst:  # larger, or NaN
             worst = qp_error
         if not np.all(np.isfinite(w)):
-            return w, np.inf
-    return w, worst
+            return w, np.inf, taken
+    return w, worst, taken

@@ -172,6 +172,10 @@ class RtiSettings:
 
     iterations: int = 1
     """Gauss–Newton steps per sample (1 is the classic real-time iteration)."""
+    extra_step_tolerance: float = np.inf
+    """One more step when the last of the ``iterations`` moved a planned input by more than
+    this (in input units); ``inf``, never. A convergence test: the typical sample keeps
+    ``iterations`` steps, the worst case takes one more."""
     condensed: bool = True
     """Multiple-shooting problems: eliminate the states by a rollout inside the step, so the
     QP has the N inputs only and the step backtracks on the cost; false: the QP over states
@@ -220,6 +224,8 @@ class RtiSettings:
             raise ValueError(f"line_search must be one of {', '.join(LINE_SEARCHES)}, got {self.line_search!r}")
         if self.iterations < 1:
             raise ValueError(f"iterations must be >= 1, got {self.iterations}")
+        if not self.extra_step_tolerance > 0:
+            raise ValueError(f"extra_step_tolerance must be > 0 (inf: no extra step), got {self.extra_step_tolerance}")
         if self.sensitivity_block < 0:
             raise ValueError(f"sensitivity_block must be >= 0 (0: exact widths), got {self.sensitivity_block}")
         if self.qp_iterations < 10:

@@ -141,8 +141,19 @@ def test_daqp_step_reports_a_qp_it_could_not_solve():
     assert float(qp_error) == np.inf
     _, qp_error = step(np.zeros(N), np.r_[(-H).ravel(order="F"), g])  # not convex: DAQP's setup fails
     assert float(qp_error) > 1e-6
-    w, worst = rti_steps(step, np.zeros(N), np.r_[H.ravel(order="F"), g * np.nan], iterations=3)
+    w, worst, _ = rti_steps(step, np.zeros(N), np.r_[H.ravel(order="F"), g * np.nan], iterations=3)
     assert worst == np.inf and not np.all(np.isfinite(w))  # ends at the first NaN: no NaN bounds for the QP
+
+
+def test_an_unsettled_last_step_is_followed_by_one_more():
+    """``extra_step_tolerance``: a third step when the second still moved the iterate by
+    more than the tolerance, never a fourth; none when it settled."""
+    w = ca.MX.sym("w", 2)
+    halve = ca.Function("halve", [w, ca.MX.sym("p")], [w + (1.0 - w) / 2, ca.MX(0)])  # halves the distance to 1
+    steps = [(w_out, taken) for w_out, _, taken in
+             (rti_steps(halve, np.zeros(2), 0.0, 2, tol) for tol in (np.inf, 0.3, 0.2, 1e-9))]
+    assert [taken for _, taken in steps] == [2, 2, 3, 3]  # the second step moved by 0.25
+    assert np.allclose(steps[0][0], 0.75) and np.allclose(steps[2][0], 0.875) and np.allclose(steps[3][0], 0.875)
 
 
 def test_compiled_daqp_step_equals_the_in_process_one_and_never_aborts(tmp_path):

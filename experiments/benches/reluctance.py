@@ -252,11 +252,14 @@ def _defaults() -> dict:
             # actuator's steps won. The exact table and 2 steps per sample (not the rounded
             # table and 3) fit the 5 kHz period in C; the 'descent' line search brings the C
             # controller's median step from 30 % to 21 % of the period. It runs as C ('auto'):
-            # in Python the controller takes more than the whole period (docs/reluctance.md)
+            # in Python the controller takes more than the whole period. A third step on the
+            # 0.1-1.3 % of samples whose second step still moved the plan by over 1 uA gives
+            # back what 'descent' cost on ramp-1.3mm (docs/reluctance.md)
             "nmpc": NmpcSettings(horizon=16, q_output=1.0, r_rate=1.0, solver="rti-c", runtime="auto"),
             "lmpc": LinearMpcSettings(horizon=16, q_output=1.0, r_rate=1e-6),
             "smoothing": Smoothing(eps=1e-5), "table": ForceTableSettings(),
-            "solver": SolverSettings(rti=RtiSettings(iterations=2, line_search="descent")).uniform(max_iter=50)}
+            "solver": SolverSettings(rti=RtiSettings(iterations=2, extra_step_tolerance=1e-6,
+                                                     line_search="descent")).uniform(max_iter=50)}
 
 
 IDENTIFIED = ("rig", "ecore", "ccore", "identification")
