@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from hystmpc.experiments.baselines import InverseCompensation, PidController, PidGains, inverse_feedforward_pid
-from hystmpc.experiments.bench import Bench, ControllerSpec
+from hystmpc.experiments.bench import MULTIPLE_SHOOTING, SINGLE_SHOOTING, Bench, ControllerSpec
 from hystmpc.experiments.config import apply_overrides, get_value
 from hystmpc.experiments.runner import Scenario
 from hystmpc.models.document import dynamics_from, read_model_document
@@ -48,7 +48,8 @@ from hystmpc.plants.actuator import HysteresisActuator
 
 LOG = logging.getLogger("hystmpc")
 _WARNED: set[str] = set()
-"""Actuator files whose output range was already said to exceed the model's reach."""
+"""Warnings already given, once per file and process (the output range beyond the model's
+reach: the path; a linear block above Nyquist: the path with "#nyquist")."""
 TUNING_RULE = "mean-rmse-nelder-mead/6"
 """Names the tuning rule in the cache key: change it when the rule changes."""
 LMPC_RATE_FACTORS = (0.01, 0.1, 1.0, 10.0, 100.0, 1e3, 1e4)
@@ -170,6 +171,9 @@ class ActuatorSpec:
             raise self._fail("name", f"must be letters, digits, '.', '_' or '-' (a folder name), got {self.name!r}")
         self.description = self._text(raw, "description", f"your actuator ({self.path.name})")
         self.output_name = self._text(raw, "output_name", "output")
+        if self.output_name.strip() == "t":  # it names the reference CSV's column beside time's 't'
+            raise self._fail("output_name", "= 't' is the reference CSV's time column; choose another name "
+                             "(for example 'position')")
         self.units = self._text(raw, "units", "")
         self.input_units = self._text(raw, "input_units", "")
         self.sample_period = self._number(raw, "sample_period", None, positive=True)
@@ -184,7 +188,9 @@ class ActuatorSpec:
         model = raw.get("model", {})
         if "file" not in model:
             raise ValueError(f"{where}: missing key 'model.file' (the hystmpc.model/1 document)")
-        model_file = (self.path.parent / str(model["file"])).resolve()
+        if not isinstance(model["file"], str) or not model["file"].strip():
+            raise self._fail("model.file", f"must be the model document's path as text, got {model['file']!r}")
+        model_file = (self.path.parent / model["file"]).resolve()
         try:
             self.identified = read_model_document(model_file, self.sample_period)
             document = json.loads(model_file.read_text())
@@ -205,6 +211,7 @@ class ActuatorSpec:
         self.dynamics = self.identified.dynamics
         if "dynamics" in raw:
             self.dynamics = dynamics_from(raw["dynamics"], f"{where}: [dynamics]")
+        self._warn_above_nyquist()
         sensor, plant = raw.get("sensor", {}), raw.get("plant", {})
         self.noise = self._number(sensor, "noise_std", 0.0, key="sensor.noise_std")
         seed = plant.get("seed", 0)
@@ -270,6 +277,25 @@ class ActuatorSpec:
                     f"reaches beyond the model's [{reach_lo:.4g}, {reach_hi:.4g}] {self.units} over input_bounds: "
                     "the scenarios' references there cannot be tracked")
 
+    def _warn_above_nyquist(self) -> None:
+        """A warning (once per file and process) when the linear block is faster than the
+        sample rate can resolve: a model sampled below twice its frequency is aliased."""
+        d, nyquist = self.dynamics, 0.5 / self.sample_period
+        frequency = {"second-order": d.natural_frequency_hz,
+                     "first-order": 1 / (2 * np.pi * d.time_constant)}.get(d.kind, 0.0)
+        if frequency <= nyquist or f"{self.path}#nyquist" in _WARNED:
+            return
+        _WARNED.add(f"{self.path}#nyquist")
+        what = "natural frequency" if d.kind == "second-order" else "corner frequency 1/(2πτ)"
+        LOG.warning(f"actuator file {self.path}: the {d.kind} block's {what}, {frequency:.4g} Hz, is above the "
+                    f"Nyquist frequency ({nyquist:.4g} Hz at sample_period {self.sample_period:g} s): the "
+                    "controllers cannot resolve it; check the identification, or sample faster")
+
+    def _unused_keys(self) -> dict[str, str]:
+        """The solver keys this file's NMPC cannot use, with why: a model with creep is solved by
+        single shooting, any other by multiple shooting."""
+        return SINGLE_SHOOTING if self.identified.hysteresis()[1] > 0 else MULTIPLE_SHOOTING
+
     def _fail(self, key: str, message: str) -> ValueError:
         return ValueError(f"actuator file {self.path}: {key} {message}")
 
@@ -319,7 +345,8 @@ class ActuatorSpec:
         """Fresh parameter groups, the file's own tables applied, the PID gains tuned."""
         config = self._configured()
         config |= self.tuned_gains(config)
-        return apply_overrides(config, self.overrides)  # the file's [pid] keys win over the tuned gains
+        # the file's [pid] keys win over the tuned gains
+        return apply_overrides(config, self.overrides, self._unused_keys(), source="table")
 
     def _configured(self) -> dict:
         """The groups before tuning, the file's tables applied."""
@@ -339,7 +366,7 @@ class ActuatorSpec:
                   "lmpc": LinearMpcSettings(horizon=horizon, q_output=(100 / span_y) ** 2,
                                             r_rate=1e-3 * (100 / span_y) ** 2)}
         self._check_types(config)
-        return apply_overrides(config, self.overrides)
+        return apply_overrides(config, self.overrides, self._unused_keys(), source="table")
 
     def _check_types(self, config: dict) -> None:
         """A table value of the wrong TOML type (``horizon = "20"``, ``preview = 1``) is refused,
@@ -350,7 +377,7 @@ class ActuatorSpec:
             except ValueError:
                 continue  # an unknown key: apply_overrides names it
             expected = _kind(current)
-            if expected is not None and _kind(value) != expected:
+            if expected is not None and not _fits(value, expected):
                 raise ValueError(f"{key} = {value!r}: expected {expected} (the default is {current!r})")
 
     def _settling(self) -> float:
@@ -573,7 +600,7 @@ class ActuatorSpec:
                      input_bounds=self.input_bounds, input_rate=self.input_rate,
                      loop=("input", "hysteresis_output", f"input [{self.input_units}]",
                            f"hysteresis output [{self.units}]"),
-                     default_scenario="sine", source=str(self.path))
+                     default_scenario="sine", source=str(self.path), fixed=self._unused_keys())
 
 
 def _kind(value) -> str | None:
@@ -582,9 +609,17 @@ def _kind(value) -> str | None:
         return "true or false"
     if isinstance(value, str):
         return "text"
-    if isinstance(value, (int, float)):
+    if isinstance(value, int):
+        return "an integer"
+    if isinstance(value, float):
         return "a number"
     return None
+
+
+def _fits(value, expected: str) -> bool:
+    """Whether a TOML value is of the ``expected`` kind (an integer is a number as well)."""
+    kind = _kind(value)
+    return kind == expected or (expected == "a number" and kind == "an integer")
 
 
 def _flatten(table: dict, prefix: str = ""):

@@ -632,9 +632,11 @@ TUNED_GROUPS = ("pid", "inverse_ff_pid", "lmpc")
 
 def _list(args) -> int:
     from hystmpc.experiments.config import key_table
-    info = {}
+    info, solvers = {}, SOLVERS
     for name in [args.bench] if args.bench else all_bench_names():
         bench = _bench(name)
+        if args.bench and "solver.gn.max_iter" in bench.fixed:  # gn: single-shooting NMPCs only
+            solvers = tuple(s for s in SOLVERS if s != "gn")
         info[bench.name if args.bench else name] = {
             "description": bench.description, "paper": bench.paper, "units": bench.units,
             "input_units": bench.input_units, "sample_period_s": bench.sample_period,
@@ -648,7 +650,7 @@ def _list(args) -> int:
                 info[bench.name]["tuned_at_first_run"] = TUNED_GROUPS
     if args.json:
         from hystmpc.experiments.report import json_safe
-        print(json.dumps(json_safe({"benches": info, "solvers": list(SOLVERS), "families": list(FAMILY_NAMES)}),
+        print(json.dumps(json_safe({"benches": info, "solvers": list(solvers), "families": list(FAMILY_NAMES)}),
                          indent=2, default=str))
         return 0
     for name, b in info.items():
@@ -667,7 +669,7 @@ def _list(args) -> int:
         if "tuned_at_first_run" in b:
             print(f"  {', '.join(g + '.*' for g in b['tuned_at_first_run'])}: the values before tuning; the first "
                   "run or compare tunes the baselines on the nominal model (what you --set stays)")
-    print(f"solvers (--set nmpc.solver=...): {', '.join(SOLVERS)}")
+    print(f"solvers (--set nmpc.solver=...): {', '.join(solvers)}")
     print(f"model families (hystmpc identify FAMILY DATA.csv): {', '.join(FAMILY_NAMES)}")
     if not args.bench:
         print("'hystmpc list BENCH' shows every --set key of a bench with its default and units")

@@ -65,14 +65,19 @@ def _number(text: str) -> Any:
     return text.strip()
 
 
-def _parse(text: str, current: Any, key: str, infinite_ok: bool = False) -> Any:
+def _assignment(source: str, key: str, text: str) -> str:
+    """How the user wrote an assignment: ``--set KEY=VALUE`` or a table's ``KEY = VALUE``."""
+    return f"--set {key}={text}" if source == "--set" else f"{key} = {text}"
+
+
+def _parse(text: str, current: Any, key: str, infinite_ok: bool = False, source: str = "--set") -> Any:
     if isinstance(current, bool):
         lowered = text.strip().lower()
         if lowered in ("true", "1", "yes"):
             return True
         if lowered in ("false", "0", "no"):
             return False
-        raise ValueError(f"--set {key}={text!r}: expected true or false")
+        raise ValueError(f"{_assignment(source, key, repr(text))}: expected true or false")
     try:
         if isinstance(current, int):
             return int(text)
@@ -100,42 +105,43 @@ def _parse(text: str, current: Any, key: str, infinite_ok: bool = False) -> Any:
         else:
             kind = ("an integer" if isinstance(current, int) else "a number or inf" if infinite_ok
                     else "a finite number")
-        raise ValueError(f"--set {key}={text!r}: expected {kind}") from None
+        raise ValueError(f"{_assignment(source, key, repr(text))}: expected {kind}") from None
     return text
 
 
-def unknown_key(key: str, config: dict[str, Any]) -> ValueError:
-    """The error for a key ``config`` does not have: the nearest key, or the group's keys."""
+def unknown_key(key: str, config: dict[str, Any], source: str = "--set") -> ValueError:
+    """The error for a key ``config`` does not have: the nearest key, or the group's keys
+    (``source``: how the user gave it, ``--set`` or a file's table)."""
     if key in MOVED:
-        return ValueError(f"--set {key} is now {MOVED[key]}")
+        return ValueError(f"{source} {key} is now {MOVED[key]}")
     group = key.split(".", 1)[0]
     if group not in config:
-        return ValueError(f"unknown --set group {group!r} in {key!r}; allowed groups: {', '.join(config)}")
+        return ValueError(f"unknown {source} group {group!r} in {key!r}; allowed groups: {', '.join(config)}")
     fields = [k.split(".", 1)[1] for k in _keys(group, config[group])]
     near = difflib.get_close_matches(key.split(".", 1)[-1], fields, n=1, cutoff=0.6)
     every = "'hystmpc list BENCH' shows every key with its default and units"
     if near:
-        return ValueError(f"unknown --set key {key!r}; did you mean '{group}.{near[0]}'? ({every})")
+        return ValueError(f"unknown {source} key {key!r}; did you mean '{group}.{near[0]}'? ({every})")
     if len(fields) <= 12:
-        return ValueError(f"unknown --set key {key!r}; keys of group {group}: {', '.join(fields)}")
-    return ValueError(f"unknown --set key {key!r}; group {group} has {len(fields)} keys: {every}")
+        return ValueError(f"unknown {source} key {key!r}; keys of group {group}: {', '.join(fields)}")
+    return ValueError(f"unknown {source} key {key!r}; group {group} has {len(fields)} keys: {every}")
 
 
-def _replace(obj, path: list[str], text: str, key: str):
+def _replace(obj, path: list[str], text: str, key: str, source: str = "--set"):
     """``obj`` with the field at ``path`` set from ``text`` (dataclasses rebuilt and re-validated)."""
     name, rest = path[0], path[1:]
     value = getattr(obj, name)
     if isinstance(value, dict):
         new = {**value, ".".join(rest): _number(text)}
     elif rest:
-        new = _replace(value, rest, text, key)
+        new = _replace(value, rest, text, key, source)
     else:  # inf where the setting's own default is inf (it means "none")
         default = next((f.default for f in dataclasses.fields(obj) if f.name == name), None)
-        new = _parse(text, value, key, infinite_ok=isinstance(default, float) and default == float("inf"))
+        new = _parse(text, value, key, isinstance(default, float) and default == float("inf"), source)
     try:
         return dataclasses.replace(obj, **{name: new})
     except ValueError as exc:
-        raise ValueError(f"--set {key}={text}: {exc}") from None
+        raise ValueError(f"{_assignment(source, key, text)}: {exc}") from None
 
 
 def _match(key: str, allowed: list[str]) -> bool:
@@ -145,9 +151,10 @@ def _match(key: str, allowed: list[str]) -> bool:
                for a in allowed)
 
 
-def apply_overrides(config: dict[str, Any], assignments: list[str], fixed: dict[str, str] | None = None
-                    ) -> dict[str, Any]:
-    """Return a new configuration with each ``KEY=VALUE`` applied.
+def apply_overrides(config: dict[str, Any], assignments: list[str], fixed: dict[str, str] | None = None,
+                    source: str = "--set") -> dict[str, Any]:
+    """Return a new configuration with each ``KEY=VALUE`` applied (``source`` names where
+    they came from in the errors: ``--set``, or ``table`` for a file's tables).
 
     Raises ``ValueError`` naming the bad key (with the nearest allowed one), a key in
     ``fixed`` (with its reason) or the bad value; the dataclasses' own validation then
@@ -157,15 +164,15 @@ def apply_overrides(config: dict[str, Any], assignments: list[str], fixed: dict[
     allowed = allowed_keys(config)
     for assignment in assignments:
         if "=" not in assignment:
-            raise ValueError(f"--set {assignment!r}: expected KEY=VALUE")
+            raise ValueError(f"{source} {assignment!r}: expected KEY=VALUE")
         key, text = assignment.split("=", 1)
         key = key.strip()
         if not _match(key, allowed):
-            raise unknown_key(key, config)
+            raise unknown_key(key, config, source)
         if fixed and key in fixed:
-            raise ValueError(f"--set {key} cannot be changed on this bench: {fixed[key]}")
+            raise ValueError(f"{source} {key} cannot be changed on this bench: {fixed[key]}")
         group, *path = key.split(".")
-        config[group] = _replace(config[group], path, text, key)
+        config[group] = _replace(config[group], path, text, key, source)
     assigned = {assignment.split("=", 1)[0].strip() for assignment in assignments}
     for key, leader in FOLLOWS.items():
         group, field = key.split(".")

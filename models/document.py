@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from hystmpc.models.identification import FAMILIES, Identified
-from hystmpc.models.linear_dynamics import KINDS, LinearDynamics
+from hystmpc.models.linear_dynamics import KIND_KEYS, KINDS, LinearDynamics
 
 SCHEMA = "hystmpc.model/1"
 
@@ -61,6 +61,20 @@ def dynamics_from(spec: dict, where: str) -> LinearDynamics:
     unknown = sorted(set(spec) - allowed)
     if unknown:
         raise ValueError(f"{where}: unknown dynamics key {unknown[0]!r}; allowed: {', '.join(sorted(allowed))}")
+    own = ("kind", *KIND_KEYS[kind], "delay_samples")
+    for key in allowed - set(own):
+        if key in spec:  # a key of another kind would be ignored
+            raise ValueError(f"{where}: dynamics key {key!r} does not apply to kind {kind!r}; its keys: "
+                             f"{', '.join(own)}")
+    for key in KIND_KEYS[kind]:
+        if key not in spec:  # no silent default for what describes the actuator
+            raise ValueError(f"{where}: dynamics kind {kind!r} needs {key!r}; its keys: {', '.join(own)}")
+    for key in own[1:]:
+        value = spec.get(key, 0)
+        if isinstance(value, bool) or not isinstance(value, int | float) or \
+                (key == "delay_samples" and not isinstance(value, int)):
+            kind_of = "an integer" if key == "delay_samples" else "a number"
+            raise ValueError(f"{where}: dynamics.{key} must be {kind_of}, got {value!r}")
     try:
         return LinearDynamics(**spec)
     except (TypeError, ValueError) as exc:

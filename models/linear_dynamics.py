@@ -16,6 +16,8 @@ import numpy as np
 from hystmpc.models.prediction import Dynamics, PredictionModel
 
 KINDS = ("none", "first-order", "second-order")
+KIND_KEYS = {"none": (), "first-order": ("time_constant",), "second-order": ("natural_frequency_hz", "damping")}
+"""The parameters each kind needs (``delay_samples``, 0 by default, applies to all)."""
 
 
 @dataclass(frozen=True)

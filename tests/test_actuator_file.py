@@ -150,7 +150,19 @@ GOOD = (EXAMPLE / "piezo.toml").read_text()
     (GOOD.replace("sample_period = 0.001", "sample_period = -1"), "sample_period must be"),
     (GOOD.replace("[plant]", "[plant]\nmismatch = 3") .replace("mismatch = 0.05\n", ""), "mismatch"),
     (GOOD.replace("[sensor]", "[nmpc]\nhorizon = 1\n[sensor]"), "nmpc.horizon"),
-    (GOOD.replace("[sensor]", '[nmpc]\nhorizon = "20"\n[sensor]'), "nmpc.horizon = '20': expected a number"),
+    (GOOD.replace("[sensor]", '[nmpc]\nhorizon = "20"\n[sensor]'), "nmpc.horizon = '20': expected an integer"),
+    (GOOD.replace("[sensor]", "[nmpc]\nhorizon = 20.0\n[sensor]"), "nmpc.horizon = 20.0: expected an integer"),
+    (GOOD.replace("[sensor]", "[nmpc]\nhorizon = 0\n[sensor]"), "nmpc.horizon = 0: horizon must be >= 2"),
+    (GOOD.replace("[sensor]", "[nmpc]\nhorizons = 20\n[sensor]"), "unknown table key 'nmpc.horizons'"),
+    (GOOD.replace("[sensor]", "[solver.gn]\nmax_iter = 3\n[sensor]"), "solver.gn.max_iter cannot be changed"),
+    (GOOD.replace('file = "piezo_model.json"', "file = 3"), "model.file must be the model document's path"),
+    (GOOD.replace('output_name = "displacement"', 'output_name = "t"'), "output_name = 't' is the reference"),
+    (GOOD + "\n[dynamics]\nkind = 'first-order'\ntime_constant = 0.002\ndamping = 0.3\n",
+     "dynamics key 'damping' does not apply to kind 'first-order'"),
+    (GOOD + "\n[dynamics]\nkind = 'second-order'\nnatural_frequency_hz = 150.0\n",
+     "dynamics kind 'second-order' needs 'damping'"),
+    (GOOD + "\n[dynamics]\nkind = 'first-order'\ntime_constant = 'fast'\n",
+     "dynamics.time_constant must be a number, got 'fast'"),
     (GOOD.replace("[sensor]", "[nmpc]\npreview = 1\n[sensor]"), "nmpc.preview = 1: expected true or false"),
     ("name = 'x'\n[model\n", "not valid TOML"),
     (GOOD.replace('name = "piezo-stage"', 'name = "../../elsewhere"'), "name must be letters, digits"),
@@ -172,3 +184,12 @@ def test_an_output_range_beyond_the_models_reach_is_said(piezo, capsys):
     far = GOOD.replace("output_range = [0.0, 8.5]", "output_range = [0.0, 500.0]")
     assert main(["list", _actuator(piezo, far)]) == 0
     assert "output_range [0, 500] reaches beyond the model's" in capsys.readouterr().err
+
+
+def test_a_linear_block_above_nyquist_is_said_and_gn_is_not_offered(piezo, capsys):
+    assert main(["list", _actuator(piezo, GOOD)]) == 0
+    out, err = capsys.readouterr()
+    assert "Nyquist" not in err and "solvers (--set nmpc.solver=...): ipopt, sqp, rti, rti-c\n" in out
+    fast = GOOD + "\n[dynamics]\nkind = 'second-order'\nnatural_frequency_hz = 3000.0\ndamping = 0.3\n"
+    assert main(["list", _actuator(piezo, fast.replace('name = "piezo-stage"', 'name = "fast"'))]) == 0
+    assert "natural frequency, 3000 Hz, is above the Nyquist frequency (500 Hz" in capsys.readouterr().err
