@@ -278,16 +278,15 @@ class ActuatorSpec:
                     "the scenarios' references there cannot be tracked")
 
     def _warn_above_nyquist(self) -> None:
-        """A warning (once per file and process) when the linear block is faster than the
-        sample rate can resolve: a model sampled below twice its frequency is aliased."""
+        """A warning (once per file and process) when a second-order block resonates above
+        what the sample rate resolves: its ringing is aliased. (A first-order lag shorter
+        than a sample is only a static gain and a small delay, which is exact.)"""
         d, nyquist = self.dynamics, 0.5 / self.sample_period
-        frequency = {"second-order": d.natural_frequency_hz,
-                     "first-order": 1 / (2 * np.pi * d.time_constant)}.get(d.kind, 0.0)
-        if frequency <= nyquist or f"{self.path}#nyquist" in _WARNED:
+        if d.kind != "second-order" or d.natural_frequency_hz <= nyquist or f"{self.path}#nyquist" in _WARNED:
             return
         _WARNED.add(f"{self.path}#nyquist")
-        what = "natural frequency" if d.kind == "second-order" else "corner frequency 1/(2πτ)"
-        LOG.warning(f"actuator file {self.path}: the {d.kind} block's {what}, {frequency:.4g} Hz, is above the "
+        LOG.warning(f"actuator file {self.path}: the second-order block's natural frequency, "
+                    f"{d.natural_frequency_hz:.4g} Hz, is above the "
                     f"Nyquist frequency ({nyquist:.4g} Hz at sample_period {self.sample_period:g} s): the "
                     "controllers cannot resolve it; check the identification, or sample faster")
 

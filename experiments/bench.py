@@ -10,16 +10,17 @@ gets only those, so a key a bench accepts is one something uses.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
 
 from hystmpc.experiments.config import apply_overrides
 from hystmpc.experiments.runner import Controller, InputGuard, Labels, RunResult, Scenario, simulate
+from hystmpc.mpc.settings import GaussNewtonSettings
 
-MULTIPLE_SHOOTING = {f"solver.gn.{key}": "solver gn solves single-shooting problems; this bench's NMPC is "
-                     "multiple shooting (use ipopt, sqp, rti or rti-c)" for key in ("max_iter", "tol")}
+MULTIPLE_SHOOTING = {f"solver.gn.{f.name}": "solver gn solves single-shooting problems; this bench's NMPC is "
+                     "multiple shooting (use ipopt, sqp, rti or rti-c)" for f in fields(GaussNewtonSettings)}
 """Keys a bench with a multiple-shooting NMPC cannot use."""
 SINGLE_SHOOTING = {"solver.rti.condensed": "this bench's NMPC is single shooting: its RTI step has the inputs "
                                            "as its only unknowns"}

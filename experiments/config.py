@@ -65,9 +65,12 @@ def _number(text: str) -> Any:
     return text.strip()
 
 
-def _assignment(source: str, key: str, text: str) -> str:
-    """How the user wrote an assignment: ``--set KEY=VALUE`` or a table's ``KEY = VALUE``."""
-    return f"--set {key}={text}" if source == "--set" else f"{key} = {text}"
+def _assignment(source: str, key: str, text: str, quoted: bool = False) -> str:
+    """How the user wrote an assignment: ``--set KEY=VALUE`` (``quoted``: the value as a
+    Python string) or a table's ``KEY = VALUE`` (the TOML value as written)."""
+    if source != "--set":
+        return f"{key} = {text}"
+    return f"--set {key}={text!r}" if quoted else f"--set {key}={text}"
 
 
 def _parse(text: str, current: Any, key: str, infinite_ok: bool = False, source: str = "--set") -> Any:
@@ -77,7 +80,7 @@ def _parse(text: str, current: Any, key: str, infinite_ok: bool = False, source:
             return True
         if lowered in ("false", "0", "no"):
             return False
-        raise ValueError(f"{_assignment(source, key, repr(text))}: expected true or false")
+        raise ValueError(f"{_assignment(source, key, text, quoted=True)}: expected true or false")
     try:
         if isinstance(current, int):
             return int(text)
@@ -105,7 +108,7 @@ def _parse(text: str, current: Any, key: str, infinite_ok: bool = False, source:
         else:
             kind = ("an integer" if isinstance(current, int) else "a number or inf" if infinite_ok
                     else "a finite number")
-        raise ValueError(f"{_assignment(source, key, repr(text))}: expected {kind}") from None
+        raise ValueError(f"{_assignment(source, key, text, quoted=True)}: expected {kind}") from None
     return text
 
 

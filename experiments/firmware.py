@@ -39,7 +39,7 @@ HEADER = r"""/* {name}: the whole NMPC controller of bench "{bench}", generated 
    {name}_init(&ctrl) once before the first sample (and to restart from rest).
 
    {name}_step does {feedback_doc}, the warm start ({warm_start_doc}),
-   {iterations} Gauss-Newton step(s) with the QP, the
+   {iterations} Gauss-Newton step(s) with the QP{extra_step_doc}, the
    success test and, on a failure, the fallback input; u is always finite and inside the bounds
    {lower:g} <= u <= {upper:g} {input_units} with |u - u_previous| <= {rate:g} {input_units} per sample.
    {name}_prepare {prepare_doc}; {name}_step calls
@@ -329,6 +329,7 @@ def write_controller(bench: Bench, config: dict, out: Path, name: str | None = N
                   lower=float(bounds.lower), upper=float(bounds.upper), rate=float(bounds.rate),
                   input_units=labels.input_units or "input units", units=labels.units or "output units",
                   output=labels.output_name, sensors=sensors, iterations=controller.solvers.rti.iterations,
+                  extra_step_doc=_extra_step_doc(controller.solvers.rti.extra_step_tolerance),
                   status_macros=status_macros, bytes=n_bytes, **docs,
                   warm_start_doc=WARM_START_DOCS[controller.settings.warm_start],
                   allocation=ALLOCATION[controller.solvers.rti.qp],
@@ -825,3 +826,11 @@ def _run(cmd: list[str], what: str) -> None:
     done = subprocess.run(cmd, capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f"{what} failed: {done.stderr.strip()[-1500:]}")
+
+
+def _extra_step_doc(tolerance: float) -> str:
+    """The header's words for ``solver.rti.extra_step_tolerance`` (empty when never)."""
+    if not np.isfinite(tolerance):
+        return ""
+    return (f" (one more where the last still moved a planned input by more than {tolerance:g}: budget the "
+            "longest sample for it)")

@@ -54,6 +54,9 @@ def dynamics_from(spec: dict, where: str) -> LinearDynamics:
     """A :class:`LinearDynamics` from a ``dynamics`` table (model document or actuator file)."""
     if not isinstance(spec, dict):
         raise ValueError(f"{where}: dynamics must be a table, got {spec!r}")
+    if "kind" not in spec and spec:  # a table of parameters without its kind
+        raise ValueError(f"{where}: dynamics.kind is missing: the table describes the whole block (it replaces "
+                         f"the model document's), so give its kind; allowed: {', '.join(KINDS)}")
     kind = spec.get("kind", "none")
     if kind not in KINDS:
         raise ValueError(f"{where}: dynamics.kind = {kind!r}; allowed: {', '.join(KINDS)}")

@@ -106,6 +106,11 @@ def _finite(v) -> ca.MX:
     return ca.sum1(ca.fabs(ca.vec(v))) < ca.inf
 
 
+def _is_nan(x) -> ca.MX:
+    """1 where ``x`` is NaN: it fails every comparison (``x != x`` is simplified away)."""
+    return ca.logic_not(ca.logic_or(x <= 0, x > 0))
+
+
 def _clip(v, lower, upper):
     return ca.fmin(ca.fmax(v, lower), upper)
 
@@ -330,27 +335,13 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     p = ca.vertcat(condition, u_last, refs, u_ff)
 
     settings = controller.solvers.rti
-    extra_step = _extra_rti_step(problem.rti, N, p.numel()) if np.isfinite(settings.extra_step_tolerance) else None
+    extra_step = _extra_rti_step(problem.rti, N, p.numel())  # one Function for both starts: one name in C
 
     def rti_steps(guess):
-        """The RTI steps from ``guess`` made feasible (as :func:`hystmpc.mpc.rti.rti_steps`): the
-        last iterate, and whether they succeeded."""
+        """The RTI steps from ``guess`` made feasible: the last iterate, and whether they succeeded."""
         w = feasible_guess_expr(guess, u_last, u_min, u_max, rate)
-        worst, broken, moved = ca.MX(0), ca.MX(0), ca.MX(0)
-
-        def take(w, step):
-            nonlocal worst, broken, moved
-            w_next, qp_error = step
-            worst = ca.if_else(qp_error <= worst, worst, qp_error)  # as rti_steps: a NaN error replaces the worst
-            finite = _finite(w_next)
-            broken = ca.logic_or(broken, ca.logic_not(finite))
-            moved = ca.mmax(ca.fabs(w_next - w))
-            return ca.if_else(finite, w_next, w)  # a non-finite step is a failure; the next QP gets finite data
-
-        for _ in range(settings.iterations):
-            w = take(w, problem.rti(w, p))
-        if extra_step is not None:
-            w = take(w, extra_step(ca.logic_and(ca.logic_not(broken), moved > settings.extra_step_tolerance), w, p))
+        w, worst, broken = rti_steps_expr(problem.rti, w, p, settings.iterations, settings.extra_step_tolerance,
+                                          extra_step)
         return w, ca.logic_and(ca.logic_and(ca.logic_not(lost), ca.logic_not(broken)), worst <= QP_TOLERANCE)
 
     w, success = rti_steps(u_guess)
@@ -381,6 +372,36 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     feedback = ca.Function(f"{name}_feedback", [mem, z, window], [mem_next, u, status, predicted],
                            ["mem", "z", "ref_preview"], ["mem_next", "u", "status", "predicted"])
     return feedback, prepare, layout
+
+
+def rti_steps_expr(rti: ca.Function, w, p, iterations: int, extra_step_tolerance: float = np.inf,
+                   extra_step: ca.Function | None = None):
+    """:func:`hystmpc.mpc.rti.rti_steps` as expressions: ``(w, worst, broken)``, the last
+    finite iterate, the worst ``qp_error`` (a NaN stays) and whether a step was not finite.
+    A non-finite step keeps the iterate before it, so that the next QP gets finite data.
+    ``extra_step``: :func:`_extra_rti_step` of ``rti``, made once per generated controller."""
+    worst, broken, moved = ca.MX(0), ca.MX(0), ca.MX(0)
+
+    def take(w, step, taken=None):
+        """The iterate after ``step``, counted only where ``taken`` (when given)."""
+        nonlocal worst, broken, moved
+        w_next, qp_error = step
+        new_worst = ca.if_else(ca.logic_or(qp_error <= worst, _is_nan(worst)), worst, qp_error)
+        finite = _finite(w_next)
+        new_broken = ca.logic_or(broken, ca.logic_not(finite))
+        if taken is not None:
+            new_worst, new_broken = ca.if_else(taken, new_worst, worst), ca.if_else(taken, new_broken, broken)
+        worst, broken = new_worst, new_broken
+        moved = ca.mmax(ca.fabs(w_next - w))
+        return ca.if_else(finite, w_next, w)
+
+    for _ in range(iterations):
+        w = take(w, rti(w, p))
+    if np.isfinite(extra_step_tolerance):
+        needed = ca.logic_and(ca.logic_not(broken), moved > extra_step_tolerance)
+        extra_step = extra_step or _extra_rti_step(rti, w.numel(), p.numel())
+        w = take(w, extra_step(needed, w, p), needed)
+    return w, worst, broken
 
 
 def _extra_rti_step(rti: ca.Function, N: int, n_p: int) -> ca.Function:

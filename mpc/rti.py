@@ -339,7 +339,7 @@ def rti_steps(rti: ca.Function, w0, p, iterations: int,
         w_next, qp_error = np.asarray(w_next).ravel(), float(qp_error)
         moved = float(np.max(np.abs(w_next - w), initial=0.0))
         w, taken = w_next, taken + 1
-        if not qp_error <= worst:  # larger, or NaN
+        if not (qp_error <= worst or np.isnan(worst)):  # larger, or NaN; a NaN stays
             worst = qp_error
         if not np.all(np.isfinite(w)):
             return w, np.inf, taken

@@ -213,6 +213,9 @@ class RtiSettings:
         if self.line_search != RtiSettings.line_search and not condensed:
             raise ValueError(f"solver.rti.line_search={self.line_search} applies to the condensed step only: the step "
                              "over states and inputs takes the full step (set solver.rti.line_search=best with it)")
+        if np.isfinite(self.extra_step_tolerance) and not condensed:
+            raise ValueError(f"solver.rti.extra_step_tolerance={self.extra_step_tolerance:g} applies to the condensed "
+                             "step only, whose iterate is the planned inputs (solver.rti.condensed=true)")
         if self.qp == "ipm" and not condensed:
             raise ValueError("solver.rti.qp=ipm needs solver.rti.condensed=true: the step over states and inputs "
                              "has unbounded states and solves with qrqp (set solver.rti.qp=daqp with it)")

@@ -120,6 +120,14 @@ CASES = [
      "expected comma-separated numbers, 2 per point"),
     (["run", "compliant", "sine-2", "--controller", "pid", "--set", "plant.hysteresis.ascending=1,2,3,1"] + SHORT,
      2, "points must increase strictly in s and in tau"),
+    # inf only where the setting's own default is inf ("none"); the extra RTI step's tolerance
+    (RUN + SHORT + ["--set", "nmpc.q_output=inf"], 2, "--set nmpc.q_output='inf': expected a finite number"),
+    (RUN + SHORT + ["--set", "solver.rti.extra_step_tolerance=0"], 2, "extra_step_tolerance must be > 0 (inf: no "
+     "extra step), got 0.0"),
+    (RUN + SHORT + ["--set", "solver.rti.extra_step_tolerance=nan"], 2, "expected a number or inf"),
+    (["run", "reluctance", "ramp-1.2mm", "--controller", "nmpc", "--set", "solver.rti.condensed=false", "--set",
+      "solver.rti.line_search=best", "--no-plots", "--duration", "0.01"], 2,
+     "solver.rti.extra_step_tolerance=1e-06 applies to the condensed step only"),
 ]
 
 

@@ -8,8 +8,14 @@ import pytest
 
 from hystmpc.experiments.benches import get_bench
 from hystmpc.models.base import interp
-from hystmpc.mpc.embedded import FunctionController, MemoryLayout, controller_functions, feasible_guess_expr
-from hystmpc.mpc.rti import feasible_guess
+from hystmpc.mpc.embedded import (
+    FunctionController,
+    MemoryLayout,
+    controller_functions,
+    feasible_guess_expr,
+    rti_steps_expr,
+)
+from hystmpc.mpc.rti import feasible_guess, rti_steps
 from hystmpc.plants.base import Measurement
 
 
@@ -83,6 +89,24 @@ def test_the_rate_feasible_guess_is_the_same_expression():
     f = ca.Function("f", [u], [feasible_guess_expr(u, 0.3, -1.0, 1.0, 0.25)])
     guess = np.array([2.0, -2.0, 0.9, 0.1, -0.5, 0.7])
     np.testing.assert_array_equal(np.asarray(f(guess)).ravel(), feasible_guess(guess, 0.3, -1.0, 1.0, 0.25))
+
+
+@pytest.mark.parametrize("nan_first", [False, True])
+@pytest.mark.parametrize("tolerance", [np.inf, 0.3, 0.2])
+def test_the_rti_steps_expressions_repeat_rti_steps(nan_first, tolerance):
+    """Steps that halve the distance to 1 (the second moves by 0.25: a third below 0.25),
+    optionally with a NaN error on the first: the same iterate, worst error (a NaN stays,
+    whether the extra step is taken or not) and failure as the Python loop."""
+    w, p = ca.MX.sym("w", 2), ca.MX.sym("p")
+    error = ca.if_else(w[0] < 0.1, np.nan, 1e-12) if nan_first else ca.MX(1e-12)
+    halve = ca.Function("halve", [w, p], [w + (1.0 - w) / 2, error])
+    python_w, python_worst, _ = rti_steps(halve, np.zeros(2), 0.0, 2, tolerance)
+    w0 = ca.MX.sym("w0", 2)
+    expr = ca.Function("steps", [w0, p], list(rti_steps_expr(halve, w0, p, 2, tolerance)))
+    w_out, worst, broken = (np.asarray(v).ravel() for v in expr(np.zeros(2), 0.0))
+    assert np.array_equal(w_out, python_w) and float(broken[0]) == 0.0
+    assert np.isnan(worst[0]) == np.isnan(python_worst) == nan_first
+    assert nan_first or worst[0] == python_worst
 
 
 def test_memory_layout_packs_the_named_parts_in_order():

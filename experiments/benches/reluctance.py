@@ -253,7 +253,7 @@ def _defaults() -> dict:
             # table and 3) fit the 5 kHz period in C; the 'descent' line search brings the C
             # controller's median step from 30 % to 21 % of the period. It runs as C ('auto'):
             # in Python the controller takes more than the whole period. A third step on the
-            # 0.1-1.3 % of samples whose second step still moved the plan by over 1 uA gives
+            # 0.5-1.4 % of samples whose second step still moved the plan by over 1 uA gives
             # back what 'descent' cost on ramp-1.3mm (docs/reluctance.md)
             "nmpc": NmpcSettings(horizon=16, q_output=1.0, r_rate=1.0, solver="rti-c", runtime="auto"),
             "lmpc": LinearMpcSettings(horizon=16, q_output=1.0, r_rate=1e-6),
