@@ -44,6 +44,7 @@ def test_identified_model_fits_the_records(piezo):
     assert doc["validation"]["rmse"] < 0.05  # um; noise 0.01 plus the stiffening no PI model has
 
 
+@pytest.mark.slow  # 7-12 s: tunes the baselines and compares (CI runs it)
 def test_nmpc_halves_the_error_of_inverse_feedforward_pid(piezo, capsys):
     out = piezo / "compare"
     assert main(["compare", str(piezo / "piezo.toml"), "--out", str(out), "--no-plots"]) == 0
@@ -56,6 +57,7 @@ def test_nmpc_halves_the_error_of_inverse_feedforward_pid(piezo, capsys):
     assert gains["ki"] > 0  # tuned, not the zero default
 
 
+@pytest.mark.slow  # 7-8 s: tunes inverse-lmpc's rate weight (CI runs it)
 def test_inverse_lmpc_is_tuned_and_the_files_table_wins(piezo, tmp_path):
     """``inverse-lmpc`` on an actuator file: the exact inverse in series with the input and a
     linear MPC on the second-order block and its dead time; its rate weight is the grid point

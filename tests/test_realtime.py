@@ -257,6 +257,7 @@ def test_a_microcontroller_build_pads_the_sensitivities_unless_told_otherwise():
     assert firmware_config(dea, dea.configure())["solver"].rti.sensitivity_block == 0  # single shooting
 
 
+@pytest.mark.slow  # 6 s: builds pam's whole controller in a fresh cache (CI runs it)
 def test_runtime_c_runs_the_generated_controller_with_the_python_controllers_inputs(tmp_path, monkeypatch):
     """``nmpc.runtime=c``: the whole generated controller in the loop, built once and cached
     (a damaged cache entry is built again); the same inputs as the Python controller to the
