@@ -18,7 +18,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from hystmpc.experiments.bench import Bench
+from hystmpc.experiments.bench import MULTIPLE_SHOOTING, Bench
 from hystmpc.experiments.benches import BENCH_NAMES, DEFAULT_BENCH, all_bench_names, get_bench
 from hystmpc.experiments.limits import check_horizons, check_run_samples, run_samples
 from hystmpc.experiments.reference import load_reference
@@ -635,7 +635,7 @@ def _list(args) -> int:
     info, solvers = {}, SOLVERS
     for name in [args.bench] if args.bench else all_bench_names():
         bench = _bench(name)
-        if args.bench and "solver.gn.max_iter" in bench.fixed:  # gn: single-shooting NMPCs only
+        if args.bench and MULTIPLE_SHOOTING.keys() <= bench.fixed.keys():  # gn: single-shooting NMPCs only
             solvers = tuple(s for s in SOLVERS if s != "gn")
         info[bench.name if args.bench else name] = {
             "description": bench.description, "paper": bench.paper, "units": bench.units,
