@@ -120,7 +120,13 @@ class Bench:
             from hystmpc.experiments.firmware import compiled_controller, runs_generated
             if runs_generated(config):
                 return compiled_controller(self, config)
-        return spec.build(self._groups(config, spec.groups, f"controller {name!r}"))
+        controller = spec.build(self._groups(config, spec.groups, f"controller {name!r}"))
+        if name == "nmpc" and getattr(config.get("nmpc"), "inverse_plan", "static") == "linear-mpc":
+            if "inverse-lmpc" not in self.controllers:
+                raise ValueError(f"nmpc.inverse_plan=linear-mpc takes the plan of the inverse-lmpc baseline, which "
+                                 f"bench {self.name!r} lacks; set nmpc.inverse_plan=static")
+            controller.planner = self.build_controller("inverse-lmpc", config)
+        return controller
 
     def scenario(self, name: str) -> Scenario:
         """Scenario ``name``."""

@@ -489,6 +489,10 @@ def runs_generated(config: dict) -> bool:
     ``nmpc.runtime=c``, or ``auto`` with an RTI solver."""
     settings = config.get("nmpc")
     runtime = getattr(settings, "runtime", "python")
+    if runtime == "auto" and settings.solver in RTI_SOLVERS and settings.inverse_plan != "static":
+        _say_once(f"nmpc.runtime=auto: the controller runs in Python, since nmpc.inverse_plan="
+                  f"{settings.inverse_plan} has no generated form yet")
+        return False
     return runtime == "c" or (runtime == "auto" and settings.solver in RTI_SOLVERS)
 
 
@@ -506,6 +510,10 @@ def check_runtime(config: dict) -> None:
         raise ValueError(f"nmpc.runtime=c runs the generated controller, whose solver is the RTI step; nmpc.solver is "
                          f"{settings.solver!r} (allowed with it: {', '.join(RTI_SOLVERS)}; or set nmpc.runtime=python "
                          "or auto)")
+    if settings.inverse_plan != "static":
+        raise ValueError(f"nmpc.runtime=c runs the generated controller, whose inverse-model inputs come from the "
+                         f"static inverse; nmpc.inverse_plan is {settings.inverse_plan!r} (set "
+                         "nmpc.inverse_plan=static, or nmpc.runtime=python)")
     if c_compiler() is None:
         raise ValueError(f"nmpc.runtime=c needs a C compiler ({_no_compiler()}); set nmpc.runtime=python or auto")
 

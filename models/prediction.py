@@ -154,6 +154,9 @@ class InputMemory:
     """``y -> h``: the hysteresis output that holds the output at ``y`` at rest (NumPy)."""
     disturbance: str = "output"
     """Where ``d`` enters (one of :data:`DISTURBANCES` but ``auto``)."""
+    steady_correction: Callable | None = None
+    """``(h, d) -> h`` with ``disturbance='dynamics'``: the hysteresis output that drives the
+    dynamics as ``h`` does without disturbance (None: ``h``, no correction)."""
 
     n_dynamic: int = 0
     """Number of dynamic states (the model's first states; the estimated ones)."""
@@ -191,6 +194,10 @@ class Dynamics:
     inverse of the dynamics; NumPy). Default inverse warm starts need it."""
     discrete: bool = False
     """``rhs`` gives the next state over one sample instead of the derivative."""
+    steady_correction: Callable | None = None
+    """``(h, d) -> h`` with ``disturbance='dynamics'``: the hysteresis output that drives the
+    dynamics under the disturbances ``d`` as ``h`` does without (NumPy or CasADi); the
+    default inverse warm start corrects ``steady_input`` with it. None: no correction."""
     disturbances: int = 1
     """Entries of ``d`` that ``rhs`` reads (``disturbance="dynamics"`` only): the estimator
     tracks them all and the NMPC holds them over the horizon, so besides the offset-free
@@ -392,7 +399,8 @@ def build_prediction_model(hysteresis: HysteresisModel, sample_period: float, *,
     memory_info = None
     if drive is None:
         memory_info = InputMemory(hysteresis, D, parts.dynamics_model(sample_period),
-                                  steady_input=dynamics.steady_input, disturbance=mode, n_dynamic=n_dyn)
+                                  steady_input=dynamics.steady_input, disturbance=mode, n_dynamic=n_dyn,
+                                  steady_correction=dynamics.steady_correction)
     return PredictionModel(
         step=ca.Function(f"{name}_step", [x, u, d], [x_next], ["x", "u", "d"], ["x_next"]),
         output=ca.Function(f"{name}_output", [x, d], [y], ["x", "d"], ["y"]),
@@ -422,7 +430,7 @@ class CreepPredictionModel:
                              "rhs does not read the input, and an output that does not read h")
         self.sensor_names = dynamics.sensor_names
         self.memory = InputMemory(hysteresis, 0, self.dynamics, creep_order, dynamics.steady_input, disturbance,
-                                  self.dynamics.nx)
+                                  steady_correction=dynamics.steady_correction, n_dynamic=self.dynamics.nx)
 
     @property
     def nd(self) -> int:

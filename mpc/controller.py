@@ -72,6 +72,10 @@ class NmpcController:
         and ``r_input > 0``.
     sensor_noise : float or array_like, optional
         Standard deviation of each sensor, for the default observer.
+    planner : InverseLinearMpc, optional
+        For ``inverse_plan='linear-mpc'``: the inverse-model inputs are its plan each sample
+        (:meth:`~hystmpc.mpc.linear_mpc.InverseLinearMpc.plan`); it is told the input sent.
+        A bench gives its ``inverse-lmpc`` (or set :attr:`planner` before the first sample).
     jump_threshold : float
         A reference change larger than this between samples counts as a jump (default: never).
     creep_window : int, optional
@@ -80,7 +84,7 @@ class NmpcController:
 
     def __init__(self, model: PredictionModel | CreepPredictionModel, bounds: InputBounds,
                  settings: NmpcSettings | None = None, solvers: SolverSettings | None = None, *,
-                 observer=None, inverse: Inverse | None = None, sensor_noise=None,
+                 observer=None, inverse: Inverse | None = None, planner=None, sensor_noise=None,
                  jump_threshold: float = np.inf, creep_window: int | None = None):
         settings, solvers = settings or NmpcSettings(), solvers or SolverSettings()
         settings.check_combination(solvers)  # before a solver is built (and compiled)
@@ -100,12 +104,13 @@ class NmpcController:
         self.observer = observer if observer is not None else default_observer(model, sensor_noise, creep_window)
         if inverse is None and model.memory is not None and model.memory.steady_input is not None:
             inverse = memory_inverse(model.memory, model.sample_period)
-        if inverse is None and (settings.warm_start == "inverse" or settings.r_input > 0):
+        static = settings.inverse_plan == "static"  # else a planner's inputs stand for the inverse model's
+        if inverse is None and static and (settings.warm_start == "inverse" or settings.r_input > 0):
             reason = ("the hysteresis is driven by a state" if model.memory is None else
                       "the model's Dynamics give no steady_input (the hysteresis output that holds an output at rest)")
             raise ValueError(f"no default inverse model for the warm start and r_input: {reason}; give inverse=..., "
                              "or use nmpc.warm_start=shift with nmpc.r_input=0")
-        if settings.multistart and inverse is None:
+        if settings.multistart and inverse is None and static:
             raise ValueError("nmpc.multistart also solves from the inverse model's inputs, and this model has none: "
                              "give inverse=..., or set nmpc.multistart=false")
         self.inverse = inverse
@@ -115,6 +120,7 @@ class NmpcController:
                 prepare(self.observer.estimate(settings.horizon), settings.horizon)
             except Exception:  # noqa: BLE001 - an observer with no estimate yet: built at the first sample
                 pass
+        self.planner = planner
         self.jump_threshold = float(jump_threshold)
         self.reset()
 
@@ -131,6 +137,8 @@ class NmpcController:
     def reset(self) -> None:
         """Forget estimate, plan and counters."""
         self.observer.reset()
+        if self.planner is not None:
+            self.planner.reset()
         self._started = False
         self._u_last = 0.0
         self._plan: Solution | None = None
@@ -163,6 +171,13 @@ class NmpcController:
             raise ValueError(f"ref_window needs {N + 1} samples, got {len(ref_window)}")
         if not self.settings.preview:
             ref_window = np.full(N + 1, ref_window[0])
+        planned = None
+        if self.settings.inverse_plan == "linear-mpc":
+            if self.planner is None:
+                raise ValueError("nmpc.inverse_plan=linear-mpc takes its inputs from a linear MPC's plan, and this "
+                                 "controller has none: give planner=InverseLinearMpc(...), or set "
+                                 "nmpc.inverse_plan=static")
+            planned = self.planner.plan(measurement, ref_window)  # every sample: its estimate follows the loop
         estimate_lost = self.observer.update(self.sensors(measurement), self._u_last if self._started else None)
         if estimate_lost:
             self.estimator_resets += 1  # never plan from a NaN estimate: it started again from the sensors
@@ -174,7 +189,7 @@ class NmpcController:
 
         def u_inv():  # the inverse model is only needed for warm starts, fallbacks and r_input
             if not cache:
-                u = np.asarray(self.inverse(est, refs), float).ravel()
+                u = np.asarray(self.inverse(est, refs) if planned is None else planned, float).ravel()
                 u = np.where(np.isfinite(u), u, self._u_last)
                 cache.append(np.clip(u, self.bounds.lower, self.bounds.upper))
             return cache[0]
@@ -215,14 +230,16 @@ class NmpcController:
             self.fallbacks += 1
             if self._plan is not None:
                 u = float(self._plan.u_plan[min(1, N - 1), 0])
-            elif self.inverse is not None:
+            elif self.inverse is not None or planned is not None:
                 u = float(u_inv()[0])
             else:
                 u = self._u_last
             self._plan = None
         if not np.isfinite(u):  # never send NaN to an actuator (u_inv is finite: it fills in the last input)
-            u = float(u_inv()[0]) if self.inverse is not None else self._u_last
+            u = float(u_inv()[0]) if self.inverse is not None or planned is not None else self._u_last
         u = self.bounds.clip(u, self._u_last)
+        if planned is not None:
+            self.planner.applied(u)
         self._u_last = u
         self._started = True
         return u
@@ -255,4 +272,6 @@ class NmpcController:
                 "iterations_median": float(np.median(its)), "iterations_max": int(its.max()),
                 "reinitialisations": self.reinitialisations, "estimator_resets": self.estimator_resets,
                 "statuses": dict(self.statuses),
-                **({"inverse_starts_kept": self.inverse_starts_kept} if self.settings.multistart else {})}
+                **({"inverse_starts_kept": self.inverse_starts_kept} if self.settings.multistart else {}),
+                **({"planner_failures": self.planner.failures}
+                   if self.settings.inverse_plan == "linear-mpc" and self.planner is not None else {})}

@@ -265,6 +265,10 @@ def _estimator(controller):
 
 
 def _check(controller) -> None:
+    if controller.settings.inverse_plan != "static":
+        raise NotGeneratable("a generated controller takes its inverse-model inputs from the static inverse; "
+                             f"nmpc.inverse_plan={controller.settings.inverse_plan} (a linear MPC's plan) has no "
+                             "generated form yet: set nmpc.inverse_plan=static")
     problem = controller.problem
     if getattr(problem, "multiple_shooting", False) and not getattr(problem, "condensed", False):
         raise NotGeneratable("a generated controller needs the condensed RTI step "

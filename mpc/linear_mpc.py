@@ -41,6 +41,10 @@ class Compensation(Protocol):
     def applied(self, u: float) -> None:
         """The input actually sent this sample (input-driven memories follow it)."""
 
+    def inputs_along(self, vs) -> np.ndarray:
+        """The actuator inputs that give the virtual inputs ``vs`` one after another from
+        the present memory, which is left as it is (NaN where one is out of reach)."""
+
     def sensors(self, measurement) -> np.ndarray:
         """The linear model's sensor vector for this measurement."""
 
@@ -164,10 +168,19 @@ class InverseLinearMpc:
         q, r = settings.q_output, settings.r_rate
         P = 2 * (q * self._G.T @ self._G + r * self._D.T @ self._D)
         self._qp = osqp.OSQP()
-        self._qp.setup(P=sparse.csc_matrix(np.triu(P)), q=np.zeros(N),
-                       A=sparse.csc_matrix(np.vstack((np.eye(N), self._D))), l=np.full(2 * N, -1e30),
-                       u=np.full(2 * N, 1e30), verbose=False, warm_starting=True, eps_abs=1e-7, eps_rel=1e-7,
-                       max_iter=10000, polishing=False)
+        try:
+            if not np.all(np.isfinite(P)):
+                raise ValueError("its Hessian is not finite")
+            self._qp.setup(P=sparse.csc_matrix(np.triu(P)), q=np.zeros(N),
+                           A=sparse.csc_matrix(np.vstack((np.eye(N), self._D))), l=np.full(2 * N, -1e30),
+                           u=np.full(2 * N, 1e30), verbose=False, warm_starting=True, eps_abs=1e-7, eps_rel=1e-7,
+                           max_iter=10000, polishing=False)
+        except (ValueError, osqp.OSQPException) as exc:  # an unstable model's prediction over N samples explodes
+            reason = exc if isinstance(exc, ValueError) else "OSQP could not factor it"
+            raise ValueError(f"the linear MPC's QP over {N} samples cannot be set up ({reason}): "
+                             f"its linear model's prediction is not usable (largest |P| entry "
+                             f"{np.max(np.abs(np.nan_to_num(P, nan=np.inf))):.3g}); check the model's "
+                             "parameters") from None
         self.reset()
 
     @property
@@ -192,6 +205,36 @@ class InverseLinearMpc:
 
     def step(self, measurement, ref_window) -> float:
         """One sample: a measurement and the references ``r_k..r_{k+N}`` in, the input out."""
+        v = self._solve(measurement, ref_window)
+        u = self.compensation.to_input(v)
+        u_prev = self._u_last if self._started else 0.0
+        if not np.isfinite(u):
+            u = u_prev
+        u = self.bounds.clip(u, u_prev if self._started else None)
+        self.applied(u)
+        return u
+
+    def plan(self, measurement, ref_window) -> np.ndarray:
+        """One sample's estimate and QP without sending anything: the planned actuator inputs
+        ``u_0..u_{N−1}`` (the virtual plan through the compensation, from its present memory;
+        NaN where out of reach). :meth:`applied` must then be told the input sent.
+
+        This is the warm start ``nmpc.inverse_plan=linear-mpc`` gives the NMPC.
+        """
+        v = self._solve(measurement, ref_window)
+        virtual = self._plan if self._plan is not None else np.full(self.horizon, v)
+        return np.asarray(self.compensation.inputs_along(virtual), float)
+
+    def applied(self, u: float) -> None:
+        """The input sent this sample: the Kalman filter and the compensation's memory follow it."""
+        self._v_last = self.compensation.to_virtual(u)
+        self.compensation.applied(u)
+        self._u_last = u
+        self._started = True
+
+    def _solve(self, measurement, ref_window) -> float:
+        """The estimate's updates and the QP: this sample's virtual input (the plan's first,
+        or after a failed QP the previous plan's next, or the last one held)."""
         N = self.horizon
         ref = np.asarray(ref_window, float).ravel()[1: N + 1]
         self.compensation.update(measurement)
@@ -235,21 +278,12 @@ class InverseLinearMpc:
         result = self._qp.solve(raise_error=False)
         self.solve_times.append(time.perf_counter() - start)
         if result.info.status_val in (1, 2) and np.all(np.isfinite(result.x)):
-            v = float(result.x[0])
             self._plan = result.x
-        else:
-            self.failures += 1
-            v = float(self._plan[1]) if self._plan is not None else v_prev
-            self._plan = None
-        u = self.compensation.to_input(v)
-        if not np.isfinite(u):
-            u = u_prev
-        u = self.bounds.clip(u, u_prev if self._started else None)
-        self._v_last = to_v(u)
-        self.compensation.applied(u)
-        self._u_last = u
-        self._started = True
-        return u
+            return float(result.x[0])
+        self.failures += 1
+        v = float(self._plan[1]) if self._plan is not None else v_prev
+        self._plan = None
+        return v
 
     def stats(self) -> dict:
         """QP failures (each one a fallback)."""

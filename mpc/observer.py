@@ -248,9 +248,10 @@ def exact_step(hysteresis, rest_input: float = 0.0) -> Callable:
     return step
 
 
-def _compiled_or_not(fun: ca.Function) -> ca.Function:
+def compiled_or_in_process(fun: ca.Function) -> ca.Function:
     """``fun`` compiled (cached; the same numbers to the last bit, dea's inverse in 0.12 ms
-    instead of 1.2 ms per call), or as it is, after a notice, where it cannot be."""
+    instead of 1.2 ms per call), or as it is, after a notice, where it cannot be (an inverse
+    model's Functions: the notice says so)."""
     from hystmpc.mpc.rti import LOG, compile_function
     try:
         return compile_function(fun)
@@ -264,8 +265,9 @@ def memory_inverse(memory: InputMemory, sample_period: float) -> Callable[[Estim
 
     For each reference (the one the input reaches after the dead time): the static
     inverse of the dynamics gives the hysteresis output that holds it (corrected by the
-    disturbance where it enters), the creep inverse the creep-free output (the GL sum
-    solved for its newest term), and the hysteresis model's ``inverse_step`` the input.
+    disturbance where it enters; in the dynamics, by the model's ``steady_correction``), the
+    creep inverse the creep-free output (the GL sum solved for its newest term), and the
+    hysteresis model's ``inverse_step`` the input.
     A target the hysteresis cannot reach keeps the previous input (NaN before the first).
     """
     if memory.steady_input is None:
@@ -273,6 +275,7 @@ def memory_inverse(memory: InputMemory, sample_period: float) -> Callable[[Estim
                          "output that holds an output at rest); give one, or an inverse, or use "
                          "nmpc.warm_start=shift")
     steady, mode, hysteresis = memory.steady_input, memory.disturbance, memory.hysteresis
+    correct = memory.steady_correction or (lambda h, d: h)
     alpha = memory.creep_order
 
     functions: dict[tuple, ca.Function | None] = {}
@@ -293,7 +296,7 @@ def memory_inverse(memory: InputMemory, sample_period: float) -> Callable[[Estim
             except Exception:  # noqa: BLE001 - no CasADi form: the NumPy steps below
                 functions[n, sizes] = None
             else:
-                functions[n, sizes] = _compiled_or_not(fun)
+                functions[n, sizes] = compiled_or_in_process(fun)
         return functions[n, sizes]
 
     def inverse(est: Estimate, refs) -> np.ndarray:
@@ -309,7 +312,8 @@ def memory_inverse(memory: InputMemory, sample_period: float) -> Callable[[Estim
         reached = refs[np.minimum(np.arange(n) + D, n - 1)]  # the input acts after the dead time
         d = float(est.d[0]) if len(est.d) else 0.0
         targets = np.asarray(steady(reached - d) if mode == "output" else
-                             steady(reached) - d if mode == "hysteresis" else steady(reached), float)
+                             steady(reached) - d if mode == "hysteresis" else
+                             correct(steady(reached), np.asarray(est.d, float)), float)
         state = est.hysteresis.copy()
         for queued in () if est.queue is None else est.queue:  # what the dead time still holds comes first
             state, _ = hysteresis.step(state, float(queued))
@@ -337,7 +341,7 @@ def memory_inverse(memory: InputMemory, sample_period: float) -> Callable[[Estim
         reached = ca.vertcat(*[refs[min(j + D, n - 1)] for j in range(n)])
         d = est.d[0] if est.d.numel() else 0.0
         targets = (steady(reached - d) if mode == "output" else
-                   steady(reached) - d if mode == "hysteresis" else steady(reached))
+                   steady(reached) - d if mode == "hysteresis" else correct(steady(reached), est.d))
         state = est.hysteresis
         for i in range(est.queue.numel() if est.queue is not None else 0):
             state, _ = hysteresis.step(state, est.queue[i])

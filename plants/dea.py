@@ -89,17 +89,40 @@ def steady_output_input(p: DeaParams, y):
     return (y + p.stiffening * y**3) / (1 + p.gain_variation * tanh(y / 2.0))
 
 
-def prediction_model(p: DeaParams, eps: float, direction_eps: float | None = None) -> CreepPredictionModel:
+LEARNED_GAIN_RANGE = (-0.5, 1.0)
+"""The model uses a learned relative gain error of W clipped to this range (half to twice the
+nominal stroke)."""
+
+
+def _bounded_gain(error):
+    low, high = LEARNED_GAIN_RANGE
+    return ca.fmin(ca.fmax(error, low), high) if symbolic(error) else float(np.clip(error, low, high))
+
+
+def prediction_model(p: DeaParams, eps: float, direction_eps: float | None = None,
+                     learn_gain: bool = False) -> CreepPredictionModel:
     """The NMPC's model: smooth FCKP in volts, the GL creep integral, the nominal mechanics.
 
     ``d`` adds to the FCKP output W (an input disturbance); the sensor is the laser. The
-    creep history is a parameter of the horizon prediction (design/nmpc.md).
+    creep history is a parameter of the horizon prediction (design/nmpc.md). With
+    ``learn_gain``, ``d = [offset, e]``: the mechanics see ``(1 + e) W + offset``, ``e`` a
+    relative error of the stroke (the static gain) that the estimator learns, used within
+    :data:`LEARNED_GAIN_RANGE`.
     """
-    dynamics = Dynamics(state_names=("displacement", "velocity"),
-                        rhs=lambda x, u, h, d: mechanics_rhs(p, x, h, d, tanh=ca.tanh),
-                        output=lambda x, h: x[0], steady_input=lambda y: steady_output_input(p, y))
+    if learn_gain:
+        def rhs(x, u, h, d):
+            return mechanics_rhs(p, x, (1 + _bounded_gain(d[1])) * h + d[0], 0.0, tanh=ca.tanh)
+        dynamics = Dynamics(state_names=("displacement", "velocity"), disturbances=2, rhs=rhs,
+                            output=lambda x, h: x[0], steady_input=lambda y: steady_output_input(p, y),
+                            steady_correction=lambda h, d: (h - d[0]) / (1 + _bounded_gain(d[1])))
+        mode = "dynamics"
+    else:
+        dynamics = Dynamics(state_names=("displacement", "velocity"),
+                            rhs=lambda x, u, h, d: mechanics_rhs(p, x, h, d, tanh=ca.tanh),
+                            output=lambda x, h: x[0], steady_input=lambda y: steady_output_input(p, y))
+        mode = "hysteresis"
     return build_prediction_model(Fckp(p.fckp), p.sample_period, dynamics=dynamics, eps=eps,
-                                  direction_eps=direction_eps, disturbance="hysteresis",
+                                  direction_eps=direction_eps, disturbance=mode,
                                   creep_order=p.fckp.creep_order, name="dea")
 
 

@@ -219,3 +219,45 @@ def test_rti_step_from_small_parts_equals_the_unrolled_one():
         w, p = rng.uniform(1.0, 6.0, small.horizon), rng.normal(size=n_p) * 0.1
         a, b = (np.asarray(f(w, p)[0]) for f in (small.rti, unrolled.rti))
         assert np.max(np.abs(a - b)) <= 1e-9
+
+
+def test_the_estimator_learns_a_shorter_stroke():
+    """Only the stroke is off (85 % of the model's): the EKF's relative gain error of W
+    settles near −15 %, and the offset stays small."""
+    truth = replace(NOMINAL, fckp=replace(NOMINAL.fckp, stroke=0.85 * NOMINAL.fckp.stroke))
+    config = {**BENCH.configure(), "plant": truth}
+    prepared = BENCH.prepare("single-sine", "nmpc", config)
+    BENCH.run("single-sine", "nmpc", config, duration=12.0, prepared=prepared)
+    offset, gain = prepared.controller.observer.estimate(15).d
+    assert abs(gain + 0.15) < 0.03, gain
+    assert abs(offset) < 0.05, offset
+    without = BENCH.configure(["estimator.gain=0"])
+    assert len(BENCH.build_controller("nmpc", without).observer.estimate(15).d) == 1  # the offset alone
+    with pytest.raises(ValueError, match="initial=0.1 applies to the learned gain error, but gain is 0"):
+        BENCH.configure(["estimator.gain=0", "estimator.initial=0.1"])
+
+
+def test_the_inverse_warm_start_corrects_for_the_learned_offset_and_gain():
+    """With ``d = [offset, e]`` the static inverse aims at (W − offset) / (1 + e): with e = 0
+    it is the offset-only model's inverse, and NumPy and CasADi give the same inputs."""
+    import casadi as ca
+
+    from hystmpc.mpc.observer import Estimate, memory_inverse
+    learned = prediction_model(NOMINAL, 1e-4, 3e-5, learn_gain=True)
+    offset_only = prediction_model(NOMINAL, 1e-4, 3e-5)
+    fckp = Fckp(NOMINAL.fckp)
+    state = fckp.step(fckp.step(fckp.initial_state(), 6.0)[0], 4.5)[0]  # a memory with a reversal
+    refs = 1.0 + 0.1 * np.sin(np.arange(15) / 3)
+    history = np.full(15, 0.02)
+
+    def inverse(model, d):
+        est = Estimate(np.array([1.0, 0.0]), np.asarray(d, float), state, history)
+        return memory_inverse(model.memory, NOMINAL.sample_period)(est, refs)
+    assert np.allclose(inverse(learned, [0.03, 0.0]), inverse(offset_only, [0.03]), atol=1e-9)
+    corrected, plain = inverse(learned, [0.03, 0.2]), inverse(learned, [0.03, 0.0])
+    assert np.all(np.isfinite(corrected)) and np.max(np.abs(corrected - plain)) > 0.1  # a 20 % gain moves it
+    sym = [ca.MX.sym(n, k) for n, k in (("x", 2), ("d", 2), ("h", len(state)), ("hist", 15))]
+    inverse_fn = memory_inverse(learned.memory, NOMINAL.sample_period)
+    out = inverse_fn(Estimate(*sym), ca.DM(refs))
+    value = ca.Function("inv", sym, [out])([1.0, 0.0], [0.03, 0.2], state, history)
+    assert np.allclose(np.asarray(value).ravel(), corrected, atol=1e-9)

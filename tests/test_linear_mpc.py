@@ -103,3 +103,44 @@ def test_inverse_lmpc_predicts_over_the_nmpcs_horizon_unless_told_otherwise(benc
     both = bench.configure(["lmpc.horizon=9", "nmpc.horizon=13"])
     assert (both["lmpc"].horizon, both["nmpc"].horizon) == (9, 13)
     assert bench.configure(["lmpc.horizon=9"])["nmpc"].horizon == bench.configure()["nmpc"].horizon
+
+
+def test_a_plan_begins_with_the_input_step_sends_and_leaves_the_memory_as_it_was():
+    """``plan`` + ``applied`` (the NMPC's ``inverse_plan=linear-mpc``) is ``step`` split in
+    two: the plan's first input is the one ``step`` sends (bisection against the ζ search:
+    about 1e-12 V), and the compiled chain gives the Python loop's inputs."""
+    bench = get_bench("dea")
+    config = bench.configure()
+    stepped, planned = (bench.build_controller("inverse-lmpc", config) for _ in range(2))
+    plant = bench.build_plant(config)
+    measurement = plant.reset(0)
+    n = stepped.horizon
+    for k in range(60):
+        refs = 1.0 + 0.2 * np.sin(0.3 * (k + np.arange(n + 1)))
+        u = stepped.step(measurement, refs)
+        plan = planned.plan(measurement, refs)
+        memory = planned.compensation._state.copy()
+        assert plan.shape == (n,) and abs(plan[0] - u) < 1e-9, (k, plan[0], u)
+        if k % 20 == 19:  # the same chain, run as the Python loop
+            virtual = planned._plan
+            compiled = planned.compensation.inputs_along(virtual)
+            planned.compensation._chains[n] = None
+            assert np.max(np.abs(planned.compensation.inputs_along(virtual) - compiled)) < 1e-9
+            del planned.compensation._chains[n]
+        assert np.array_equal(planned.compensation._state, memory)
+        planned.applied(u)
+        measurement = plant.step(u)
+
+
+def test_nmpc_with_a_linear_mpc_plan_needs_the_planner():
+    from hystmpc.experiments.benches.dea import build_nmpc
+    bench = get_bench("dea")
+    config = bench.configure()
+    assert config["nmpc"].inverse_plan == "linear-mpc"  # dea's default
+    attached = bench.build_controller("nmpc", config)
+    assert isinstance(attached.planner, InverseLinearMpc)
+    bare = build_nmpc(config)  # the bench's builder alone attaches nothing
+    bare.reset()
+    measurement = bench.build_plant(config).reset(0)
+    with pytest.raises(ValueError, match="nmpc.inverse_plan=linear-mpc .* set nmpc.inverse_plan=static"):
+        bare.step(measurement, np.ones(bare.horizon + 1))

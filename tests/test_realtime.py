@@ -50,7 +50,8 @@ def test_rti_stays_close_to_ipopt_on_a_short_run():
 @pytest.mark.parametrize("bench_name", ["pam", "compliant", "reluctance", "dea"])
 def test_codegen_verify_over_the_whole_default_scenario(tmp_path, bench_name):
     out = tmp_path / "report.json"
-    window = ["--set", "memory.window=200"] if bench_name == "dea" else []  # a fixed creep memory for C
+    # a fixed creep memory for C, and the static inverse (the linear MPC's plan is not generated)
+    window = ["--set", "memory.window=200", "--set", "nmpc.inverse_plan=static"] if bench_name == "dea" else []
     assert main(["codegen", bench_name, "--verify", "--out", str(tmp_path / "c"), "--json", str(out), "--quiet",
                  *window]) == 0
     report = json.loads(out.read_text())
@@ -84,7 +85,7 @@ def test_the_whole_controller_fits_a_cortex_m7(tmp_path, bench_name):
     if shutil.which("arm-none-eabi-gcc") is None:
         pytest.skip("arm-none-eabi-gcc is not installed (Debian: gcc-arm-none-eabi)")
     out = tmp_path / "report.json"
-    window = ["--set", "memory.window=200"] if bench_name == "dea" else []
+    window = ["--set", "memory.window=200", "--set", "nmpc.inverse_plan=static"] if bench_name == "dea" else []
     assert main(["codegen", bench_name, "--target", "cortex-m7", "--out", str(tmp_path / "c"), "--json", str(out),
                  "--quiet", *window]) == 0
     m7 = json.loads(out.read_text())["controller"]["cortex-m7"]
@@ -311,9 +312,16 @@ def test_runtime_auto_runs_the_generated_controller_where_it_can(tmp_path, monke
     dea = get_bench("dea")  # the whole creep memory cannot be generated: the user's solver, in Python
     caplog.clear()
     with caplog.at_level("WARNING", logger="hystmpc"):
-        whole_memory = dea.build_controller("nmpc", dea.configure(["nmpc.runtime=auto", "nmpc.solver=rti-c"]))
+        whole_memory = dea.build_controller("nmpc", dea.configure(["nmpc.runtime=auto", "nmpc.solver=rti-c",
+                                                                   "nmpc.inverse_plan=static"]))
     assert type(whole_memory).__name__ == "NmpcController" and whole_memory.settings.solver == "rti-c"
     assert "nmpc.runtime=auto runs the controller in Python" in caplog.text
+    firmware._SAID.clear()  # said once per process
+    with caplog.at_level("WARNING", logger="hystmpc"):  # dea's default second start: a linear MPC, in Python
+        planned = dea.build_controller("nmpc", dea.configure(["nmpc.runtime=auto", "nmpc.solver=rti-c",
+                                                              "memory.window=50"]))
+    assert type(planned).__name__ == "NmpcController" and planned.planner is not None
+    assert "the controller runs in Python, since nmpc.inverse_plan=linear-mpc has no generated form yet" in caplog.text
 
 
 def test_speed_keeps_two_starts_only_for_the_solvers_that_report_a_cost():

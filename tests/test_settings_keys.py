@@ -43,6 +43,8 @@ def _changed(bench_name: str, key: str, value) -> str:
         return "daqp" if value == "ipm" else "ipm"
     if field == "line_search":
         return "best" if value == "descent" else "descent"
+    if field == "inverse_plan":
+        return "static" if value == "linear-mpc" else "linear-mpc"
     if VALUES.get(field) is not None and VALUES[field] != str(value):  # else the bench's default: change it
         return VALUES[field]
     if isinstance(value, bool):

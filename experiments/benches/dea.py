@@ -17,7 +17,9 @@ Controllers (all see the laser displacement; none knows the plant's true paramet
   the applied voltages) and a linear MPC on the mechanics linearised at 1.5 mm, with the
   NMPC's horizon, bounds, preview and input disturbance (creep and mismatch land in it);
 * ``nmpc``: single-shooting NMPC on the smooth FCKP model with the GL sum split into
-  in-horizon terms and a history term computed outside the NLP (design/nmpc.md).
+  in-horizon terms and a history term computed outside the NLP (design/nmpc.md), solved
+  from its shifted plan and from ``inverse-lmpc``'s plan each sample; its EKF learns the
+  stroke as well as an offset.
 
 Every scenario starts with a 2 s raised-cosine approach from rest to the reference's first
 value, then runs the paper's 40 s; the metrics cover all 42 s.
@@ -92,20 +94,56 @@ class MemorySettings:
         return self.window or None
 
 
+@dataclass(frozen=True)
+class EstimatorNoise:
+    """The NMPC's EKF (``--set estimator.KEY=VALUE``): it estimates the membrane's
+    displacement and velocity, an offset ``d`` on the FCKP output W and, unless ``gain`` is
+    0, a relative error ``e`` of W's gain (the stroke), both random walks. The mechanics then
+    see ``(1 + e) W + d``. An offset alone leaves a membrane whose stroke is off with an error
+    that moves with W; on the sweep's membranes that made the difference against
+    ``inverse-lmpc`` (docs/dea.md)."""
+
+    disturbance: float = 1e-6
+    """Variance per sample of the offset d (mm²)."""
+    gain: float = 1e-7
+    """Variance per sample of the relative gain error e (0: not estimated). 1e-6 let e and d
+    trade off on a membrane with a 19 % longer stroke until the input saturated."""
+    initial: float = 0.04
+    """Variance of e before the first measurement (0.04: a standard deviation of 20 %)."""
+
+    def __post_init__(self):
+        if not (np.isfinite(self.disturbance) and self.disturbance > 0):
+            raise ValueError(f"disturbance must be finite and > 0, got {self.disturbance}")
+        if not (np.isfinite(self.gain) and self.gain >= 0):
+            raise ValueError(f"gain must be finite and >= 0 (0: not estimated), got {self.gain}")
+        if not (np.isfinite(self.initial) and self.initial > 0):
+            raise ValueError(f"initial must be finite and > 0, got {self.initial}")
+        if self.gain == 0 and self.initial != EstimatorNoise.initial:
+            raise ValueError(f"initial={self.initial} applies to the learned gain error, but gain is 0 (not "
+                             "estimated)")
+
+
 def build_nmpc(config: dict) -> NmpcController:
     """NMPC with the FCKP model: the controller's own exact FCKP (creep memory with window
-    L) gives W for the estimator and the history terms; an EKF estimates [x1, x2] and a
-    W offset d from the laser; the problem is single shooting (the creep is not Markov).
+    L) gives W for the estimator and the history terms; an EKF estimates [x1, x2], a W
+    offset d and (``estimator.gain`` > 0) W's relative gain error from the laser; the
+    problem is single shooting (the creep is not Markov).
 
-    Warm start: the shifted previous plan; at start-up and after a failed solve, the inverse
-    model (static mechanics, creep inverse, implicit inverse). With ``nmpc.multistart`` (the
-    default) every sample also solves from the inverse model and keeps the cheaper plan.
+    Warm start: the shifted previous plan; at start-up and after a failed solve, the
+    inverse-model inputs: ``inverse-lmpc``'s plan (``nmpc.inverse_plan=linear-mpc``, the
+    default; the bench attaches it) or the static inverse (static mechanics, creep inverse,
+    implicit inverse). With ``nmpc.multistart`` (the default) every sample also solves from
+    them and keeps the cheaper plan.
     """
     model: DeaParams = config["model"]
     smoothing: Smoothing = config["smoothing"]
-    pm = prediction_model(model, smoothing.eps, smoothing.direction)
-    ekf = DisturbanceEKF(pm.memory.dynamics, [1e-10, 1e-4, 1e-6], [max(model.noise, 1e-6) ** 2])
-    observer = MemoryObserver(pm, ekf, initial_covariance=[1e-6, 1e-4, 1e-2], creep_window=config["memory"].length)
+    noise: EstimatorNoise = config["estimator"]
+    learn_gain = noise.gain > 0
+    pm = prediction_model(model, smoothing.eps, smoothing.direction, learn_gain=learn_gain)
+    ekf = DisturbanceEKF(pm.memory.dynamics, [1e-10, 1e-4, noise.disturbance] + ([noise.gain] if learn_gain else []),
+                         [max(model.noise, 1e-6) ** 2])
+    observer = MemoryObserver(pm, ekf, initial_covariance=[1e-6, 1e-4, 1e-2] + ([noise.initial] if learn_gain else []),
+                              creep_window=config["memory"].length)
     return NmpcController(pm, InputBounds(0.0, model.fckp.u_max), config["nmpc"], config["solver"], observer=observer)
 
 
@@ -154,13 +192,16 @@ def _scenarios() -> dict[str, Scenario]:
 
 
 def _defaults() -> dict:
-    return {"plant": PLANT, "model": NOMINAL, "memory": MemorySettings(),
+    return {"plant": PLANT, "model": NOMINAL, "memory": MemorySettings(), "estimator": EstimatorNoise(),
             "pid": PidGains(kp=0.8, ki=1.67, kd=0.01), "bic": BicSettings(),
             "linear_mpc": LinearMpcSettings(),
-            "lmpc": InverseLmpcSettings(horizon=15, q_output=1e4, r_rate=1.0),
-            # two starts (the shifted plan and the inverse model's inputs) let the voltage jump across
-            # a hysteresis loop where it must, so a light rate weight pays (docs/dea.md)
-            "nmpc": NmpcSettings(horizon=15, q_output=1e4, r_rate=0.01, solver="gn", multistart=True),
+            # r_rate: the least mean RMSE of 1, 0.3, 0.1, 0.03, 0.01 (docs/dea.md)
+            "lmpc": InverseLmpcSettings(horizon=15, q_output=1e4, r_rate=0.03),
+            # two starts, the shifted plan and inverse-lmpc's plan (which sees the dynamics and the
+            # disturbance, unlike the static inverse), let the voltage jump across a hysteresis loop
+            # where it must; r_input keeps the refined plan near the linear MPC's (docs/dea.md)
+            "nmpc": NmpcSettings(horizon=15, q_output=1e4, r_rate=0.001, r_input=0.1, solver="gn",
+                                 multistart=True, inverse_plan="linear-mpc"),
             "smoothing": Smoothing(eps=1e-4, direction_eps=3e-5),
             # ftol: a Gauss-Newton solve that crawls (step fractions of 1/256 lowering the cost by
             # 0.03 % per iteration) stops as converged instead of failing at max_iter (docs/dea.md)
@@ -188,7 +229,7 @@ def _controllers() -> dict[str, ControllerSpec]:
         "inverse-lmpc": ControllerSpec("inverse-lmpc", "inverse FCKP model + linear MPC (OSQP)", build_inverse_lmpc,
                                        ("model", "lmpc")),
         "nmpc": ControllerSpec("nmpc", "NMPC on the smooth FCKP model, GL history as parameters", build_nmpc,
-                               ("model", "memory", "nmpc", "smoothing", "solver")),
+                               ("model", "memory", "estimator", "nmpc", "smoothing", "solver", "lmpc")),
     }
 
 
