@@ -25,7 +25,7 @@ import casadi as ca
 import numpy as np
 
 from hystmpc.models.base import HysteresisModel
-from hystmpc.mpc.observer import compiled_or_in_process
+from hystmpc.mpc.rti import LOG, compiled_or_slower
 
 
 @dataclass(frozen=True)
@@ -344,16 +344,23 @@ class InverseCompensation:
         """The linear model's sensors."""
         return np.asarray(self._sensors(measurement, self), float)
 
+    def prepare_chain(self, n: int) -> None:
+        """Build (and compile) :meth:`inputs_along` for ``n`` virtual inputs now, not at the
+        first sample."""
+        self._chain(n)
+
     def _chain(self, n: int) -> ca.Function | None:
         """:meth:`inputs_along` for ``n`` virtual inputs as a compiled Function (None: the
-        model's inverse has no CasADi form)."""
+        model's inverse has no CasADi form; the Python loop runs, after a notice)."""
         if n not in self._chains:
+            size = len(self.hysteresis.initial_state() if self._state is None else self._state)
+            fun = None
             try:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    x, target = ca.SX.sym("state", len(self._state)), ca.SX.sym("target")
+                    x, target = ca.SX.sym("state", size), ca.SX.sym("target")
                     step = ca.Function("inverse_step", [x, target], [*self.hysteresis.inverse_step(x, target)])
-                    start, vs = ca.MX.sym("state", len(self._state)), ca.MX.sym("v", n)
+                    start, vs = ca.MX.sym("state", size), ca.MX.sym("v", n)
                     state, inputs = start, []
                     for j in range(n):
                         state_next, h = step(state, self._hysteresis_output_of(vs[j]))
@@ -361,9 +368,11 @@ class InverseCompensation:
                         state = ca.if_else(reachable, state_next, state)
                         inputs.append(ca.if_else(reachable, self._input_of(h), np.nan))
                     fun = ca.Function("inputs_along", [start, vs], [ca.vertcat(*inputs)])
-            except Exception:  # noqa: BLE001 - a NumPy-only inverse fails in many ways: the loop runs
-                fun = None
-            self._chains[n] = None if fun is None else compiled_or_in_process(fun)
+            except Exception as exc:  # noqa: BLE001 - a NumPy-only inverse fails in many ways
+                LOG.warning(f"{type(self.hysteresis).__name__}'s inverse takes no CasADi expressions "
+                            f"({str(exc)[:200]}): a planned sequence of inputs is inverted in Python, slower")
+            self._chains[n] = None if fun is None else compiled_or_slower(
+                fun, "a planned sequence of inputs is inverted in-process, slower")
         return self._chains[n]
 
 

@@ -120,12 +120,26 @@ class Bench:
             from hystmpc.experiments.firmware import compiled_controller, runs_generated
             if runs_generated(config):
                 return compiled_controller(self, config)
-        controller = spec.build(self._groups(config, spec.groups, f"controller {name!r}"))
         if name == "nmpc" and getattr(config.get("nmpc"), "inverse_plan", "static") == "linear-mpc":
-            if "inverse-lmpc" not in self.controllers:
-                raise ValueError(f"nmpc.inverse_plan=linear-mpc takes the plan of the inverse-lmpc baseline, which "
-                                 f"bench {self.name!r} lacks; set nmpc.inverse_plan=static")
-            controller.planner = self.build_controller("inverse-lmpc", config)
+            return self._planned_nmpc(spec, config)
+        return spec.build(self._groups(config, spec.groups, f"controller {name!r}"))
+
+    def _planned_nmpc(self, spec: ControllerSpec, config: dict[str, Any]) -> Controller:
+        """The NMPC with the ``inverse-lmpc`` baseline as its planner (``nmpc.inverse_plan=linear-mpc``)."""
+        why = "nmpc.inverse_plan=linear-mpc takes the plan of the inverse-lmpc baseline"
+        if "inverse-lmpc" not in self.controllers:
+            raise ValueError(f"{why}, which bench {self.name!r} lacks; set nmpc.inverse_plan=static")
+        horizons = (config["nmpc"].horizon, getattr(config.get("lmpc"), "horizon", config["nmpc"].horizon))
+        if horizons[0] != horizons[1]:
+            raise ValueError(f"{why} over the NMPC's horizon: lmpc.horizon={horizons[1]} differs from "
+                             f"nmpc.horizon={horizons[0]}; drop lmpc.horizon, or set nmpc.inverse_plan=static")
+        try:
+            planner = self.build_controller("inverse-lmpc", config)
+        except ValueError as exc:
+            raise ValueError(f"{exc} ({why}; or set nmpc.inverse_plan=static)") from None
+        planner.prepare_plan()
+        controller = spec.build(self._groups(config, spec.groups, "controller 'nmpc'"))
+        controller.planner = planner
         return controller
 
     def scenario(self, name: str) -> Scenario:

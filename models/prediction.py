@@ -154,12 +154,12 @@ class InputMemory:
     """``y -> h``: the hysteresis output that holds the output at ``y`` at rest (NumPy)."""
     disturbance: str = "output"
     """Where ``d`` enters (one of :data:`DISTURBANCES` but ``auto``)."""
-    steady_correction: Callable | None = None
-    """``(h, d) -> h`` with ``disturbance='dynamics'``: the hysteresis output that drives the
-    dynamics as ``h`` does without disturbance (None: ``h``, no correction)."""
 
     n_dynamic: int = 0
     """Number of dynamic states (the model's first states; the estimated ones)."""
+    steady_correction: Callable | None = None
+    """``(h, d) -> h`` with ``disturbance='dynamics'``: the hysteresis output that drives the
+    dynamics as ``h`` does without disturbance (None: ``h``, no correction)."""
 
 
 @dataclass(frozen=True)
@@ -357,6 +357,9 @@ def build_prediction_model(hysteresis: HysteresisModel, sample_period: float, *,
     check_sampling(sample_period, delay_samples, substeps)
     dynamics = Dynamics(steady_input=lambda y: y) if dynamics is None else dynamics
     mode = _resolve_disturbance(disturbance, dynamics)
+    if dynamics.steady_correction is not None and mode != "dynamics":
+        raise ValueError(f"steady_correction corrects for disturbances the dynamics read (disturbance='dynamics'); "
+                         f"here d enters as {mode!r}, where the inverse corrects for it itself: drop it")
     if not (np.isfinite(creep_order) and 0 <= creep_order < 1):
         raise ValueError(f"creep_order must be in [0, 1), got {creep_order}")
     if creep_order > 0:

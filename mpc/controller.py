@@ -114,12 +114,15 @@ class NmpcController:
             raise ValueError("nmpc.multistart also solves from the inverse model's inputs, and this model has none: "
                              "give inverse=..., or set nmpc.multistart=false")
         self.inverse = inverse
-        prepare = getattr(inverse, "prepare", None)
+        prepare = getattr(inverse, "prepare", None) if static else None  # else a planner's inputs are used
         if prepare is not None:  # its Function built and compiled now, not inside the first sample
             try:
                 prepare(self.observer.estimate(settings.horizon), settings.horizon)
             except Exception:  # noqa: BLE001 - an observer with no estimate yet: built at the first sample
                 pass
+        if planner is not None and static:
+            raise ValueError("a planner gives the inverse-model inputs with nmpc.inverse_plan=linear-mpc; "
+                             "nmpc.inverse_plan is 'static': set it, or give no planner")
         self.planner = planner
         self.jump_threshold = float(jump_threshold)
         self.reset()

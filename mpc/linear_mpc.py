@@ -225,6 +225,13 @@ class InverseLinearMpc:
         virtual = self._plan if self._plan is not None else np.full(self.horizon, v)
         return np.asarray(self.compensation.inputs_along(virtual), float)
 
+    def prepare_plan(self) -> None:
+        """Build what :meth:`plan` needs ahead of the first sample (the compensation's
+        compiled inverse over the horizon, where it has one)."""
+        prepare = getattr(self.compensation, "prepare_chain", None)
+        if prepare is not None:
+            prepare(self.horizon)
+
     def applied(self, u: float) -> None:
         """The input sent this sample: the Kalman filter and the compensation's memory follow it."""
         self._v_last = self.compensation.to_virtual(u)

@@ -270,6 +270,17 @@ class CompilerNotFound(RuntimeError):
     """There is no C compiler to build the ``rti-c`` step with."""
 
 
+def compiled_or_slower(fun: ca.Function, notice: str, flags=COMPILE_FLAGS) -> ca.Function:
+    """``fun`` compiled (cached; the same numbers to the last bit), or ``fun`` itself after a
+    one-line notice, ``<why>: <notice>``, where it cannot be (no compiler, one that fails,
+    a cache it cannot write)."""
+    try:
+        return compile_function(fun, flags=flags)
+    except (RuntimeError, OSError) as exc:
+        LOG.warning(f"{str(exc)[:300]}: {notice}")
+        return fun
+
+
 def compiled_or_in_process(fun: ca.Function) -> tuple[ca.Function, bool]:
     """``(fun compiled, True)``, or ``(fun, False)`` with a one-line notice when there is no C
     compiler: ``rti-c`` then runs the same step in-process, as ``rti``."""

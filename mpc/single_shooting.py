@@ -16,9 +16,8 @@ import numpy as np
 
 from hystmpc.mpc.problem import Solution, TrackingProblem
 from hystmpc.mpc.rti import (
-    LOG,
     REGULARISATION,
-    compile_function,
+    compiled_or_slower,
     gauss_newton_step,
     rti_function,
 )
@@ -175,22 +174,16 @@ class SingleShootingProblem(TrackingProblem):
         cost = ca.Function("rti_cost", [U, params], [ca.sumsqr(residual(self._compact_predict(p, U)))])
         return linearise, cost
 
-    @staticmethod
-    def _compiled_or_in_process(fun: ca.Function, what: str) -> ca.Function:
-        try:
-            return compile_function(fun, flags=GN_COMPILE_FLAGS)
-        except (RuntimeError, OSError) as exc:  # no compiler, one that fails, or an unwritable cache: slower
-            LOG.warning(f"{str(exc)[:300]}: solver gn evaluates {what} in-process, slower")
-            return fun
-
     def _build_gauss_newton(self, U, params, residual) -> None:
         N = self.horizon
         evaluate = ca.Function("gn_eval", [U, params], [residual, ca.jacobian(residual, U)])
         # the line search's trials need the residual only; most of them are rejected
         residual_only = ca.Function("gn_residual", [U, params], [residual])
         # compiled: the same numbers to the last bit, a fifth of the time (dea: 71 against 342 µs per call)
-        self._gn_eval = self._compiled_or_in_process(evaluate, "its residual and Jacobian")
-        self._gn_residual = self._compiled_or_in_process(residual_only, "its line search's residual")
+        slower = "solver gn evaluates {} in-process, slower"
+        self._gn_eval = compiled_or_slower(evaluate, slower.format("its residual and Jacobian"), GN_COMPILE_FLAGS)
+        self._gn_residual = compiled_or_slower(residual_only, slower.format("its line search's residual"),
+                                               GN_COMPILE_FLAGS)
         self._gn_buffered = BufferedEvaluation(self._gn_eval)
         self._gn_residual_buffered = BufferedEvaluation(self._gn_residual)
         H = ca.Sparsity.dense(N, N)

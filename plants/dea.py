@@ -91,7 +91,9 @@ def steady_output_input(p: DeaParams, y):
 
 LEARNED_GAIN_RANGE = (-0.5, 1.0)
 """The model uses a learned relative gain error of W clipped to this range (half to twice the
-nominal stroke)."""
+nominal stroke). Outside it the model does not depend on the estimate, so an estimate that
+left it would not be pulled back (on a membrane with a 19 % longer stroke it reached 0.38
+with a process noise of 1e-6, and stays near 0.12 with dea's 1e-7)."""
 
 
 def _bounded_gain(error):

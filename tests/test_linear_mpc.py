@@ -144,3 +144,24 @@ def test_nmpc_with_a_linear_mpc_plan_needs_the_planner():
     measurement = bench.build_plant(config).reset(0)
     with pytest.raises(ValueError, match="nmpc.inverse_plan=linear-mpc .* set nmpc.inverse_plan=static"):
         bare.step(measurement, np.ones(bare.horizon + 1))
+    with pytest.raises(ValueError, match="lmpc.horizon=9 differs from nmpc.horizon=15; drop lmpc.horizon"):
+        bench.build_controller("nmpc", bench.configure(["lmpc.horizon=9"]))
+    static = bench.configure(["nmpc.inverse_plan=static"])
+    assert bench.build_controller("nmpc", static).planner is None
+    with pytest.raises(ValueError, match="nmpc.inverse_plan is 'static': set it, or give no planner"):
+        type(bare)(bare.model, bare.bounds, static["nmpc"], static["solver"], observer=bare.observer,
+                   planner=attached.planner)
+
+
+def test_a_steady_correction_is_refused_where_the_dynamics_do_not_read_d():
+    from dataclasses import replace
+
+    from hystmpc.experiments.benches.dea import NOMINAL
+    from hystmpc.models.fckp import Fckp
+    from hystmpc.models.prediction import Dynamics, build_prediction_model
+    dynamics = Dynamics(state_names=("x",), rhs=lambda x, u, h, d: [h - x[0]], output=lambda x, h: x[0],
+                        steady_input=lambda y: y, steady_correction=lambda h, d: h - d[0])
+    with pytest.raises(ValueError, match="here d enters as 'hysteresis'"):
+        build_prediction_model(Fckp(NOMINAL.fckp), 0.01, dynamics=dynamics, eps=1e-3, disturbance="hysteresis")
+    build_prediction_model(Fckp(NOMINAL.fckp), 0.01, dynamics=replace(dynamics, steady_correction=None), eps=1e-3,
+                           disturbance="hysteresis")
