@@ -194,14 +194,14 @@ class Dynamics:
     inverse of the dynamics; NumPy). Default inverse warm starts need it."""
     discrete: bool = False
     """``rhs`` gives the next state over one sample instead of the derivative."""
-    steady_correction: Callable | None = None
-    """``(h, d) -> h`` with ``disturbance='dynamics'``: the hysteresis output that drives the
-    dynamics under the disturbances ``d`` as ``h`` does without (NumPy or CasADi); the
-    default inverse warm start corrects ``steady_input`` with it. None: no correction."""
     disturbances: int = 1
     """Entries of ``d`` that ``rhs`` reads (``disturbance="dynamics"`` only): the estimator
     tracks them all and the NMPC holds them over the horizon, so besides the offset-free
     one they can be slow model errors, such as a gain, that the estimator learns."""
+    steady_correction: Callable | None = None
+    """``(h, d) -> h`` with ``disturbance='dynamics'``: the hysteresis output that drives the
+    dynamics under the disturbances ``d`` as ``h`` does without (NumPy or CasADi); the
+    default inverse warm start corrects ``steady_input`` with it. None: no correction."""
 
     def __post_init__(self):
         if self.state_names and self.rhs is None:
