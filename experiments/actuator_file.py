@@ -39,7 +39,7 @@ from hystmpc.experiments.config import apply_overrides, get_value
 from hystmpc.experiments.runner import Scenario
 from hystmpc.models.document import dynamics_from, read_model_document
 from hystmpc.models.identification import FAMILIES, hysteresis_output
-from hystmpc.models.linear_dynamics import LinearDynamics
+from hystmpc.models.linear_dynamics import KIND_KEYS, LinearDynamics
 from hystmpc.models.prediction import Smoothing, build_prediction_model
 from hystmpc.mpc import InputBounds, NmpcController, NmpcSettings, SolverSettings
 from hystmpc.mpc.linear_mpc import InverseLinearMpc, LinearMpcSettings
@@ -291,9 +291,16 @@ class ActuatorSpec:
                     "controllers cannot resolve it; check the identification, or sample faster")
 
     def _unused_keys(self) -> dict[str, str]:
-        """The solver keys this file's NMPC cannot use, with why: a model with creep is solved by
-        single shooting, any other by multiple shooting."""
-        return SINGLE_SHOOTING if self.identified.hysteresis()[1] > 0 else MULTIPLE_SHOOTING
+        """The keys ``--set`` and the file's tables cannot change, with why: the solver keys this
+        file's NMPC cannot use (a model with creep is solved by single shooting, any other by
+        multiple shooting), the dynamics' kind, and the other kinds' parameters."""
+        solver = SINGLE_SHOOTING if self.identified.hysteresis()[1] > 0 else MULTIPLE_SHOOTING
+        kind = self.dynamics.kind
+        dynamics = {"model.dynamics.kind": f"it is the kind of the file's [dynamics] ({kind}); change it there, "
+                                           "where the kind's own keys are checked"}
+        for key in {key for keys in KIND_KEYS.values() for key in keys} - set(KIND_KEYS[kind]):
+            dynamics[f"model.dynamics.{key}"] = f"{kind} dynamics (the file's [dynamics]) have no {key}"
+        return {**solver, **dynamics}
 
     def _fail(self, key: str, message: str) -> ValueError:
         return ValueError(f"actuator file {self.path}: {key} {message}")

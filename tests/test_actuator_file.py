@@ -195,3 +195,17 @@ def test_a_linear_block_above_nyquist_is_said_and_gn_is_not_offered(piezo, capsy
     fast = GOOD + "\n[dynamics]\nkind = 'second-order'\nnatural_frequency_hz = 3000.0\ndamping = 0.3\n"
     assert main(["list", _actuator(piezo, fast.replace('name = "piezo-stage"', 'name = "fast"'))]) == 0
     assert "natural frequency, 3000 Hz, is above the Nyquist frequency (500 Hz" in capsys.readouterr().err
+
+
+def test_set_cannot_change_the_dynamics_kind_or_give_another_kinds_parameters(piezo):
+    """The file's [dynamics] checks its kind's keys; ``--set`` must not get around that (a
+    first-order kind set on a second-order file took the dataclass's time constant in silence)."""
+    from hystmpc.experiments.actuator_file import ActuatorSpec
+    bench = ActuatorSpec(piezo / "piezo.toml").bench()
+    assert bench.configure()["model"].dynamics.kind == "second-order"
+    with pytest.raises(ValueError, match="model.dynamics.kind cannot be changed on this bench: it is the kind of "
+                                         r"the file's \[dynamics\] \(second-order\); change it there"):
+        bench.configure(["model.dynamics.kind=first-order"])
+    with pytest.raises(ValueError, match=r"second-order dynamics \(the file's \[dynamics\]\) have no time_constant"):
+        bench.configure(["model.dynamics.time_constant=0.02"])
+    assert bench.configure(["model.dynamics.damping=0.3"])["model"].dynamics.damping == 0.3
