@@ -38,7 +38,7 @@ from hystmpc.experiments.bench import MULTIPLE_SHOOTING, SINGLE_SHOOTING, Bench,
 from hystmpc.experiments.config import apply_overrides, get_value
 from hystmpc.experiments.runner import Scenario
 from hystmpc.models.document import dynamics_from, read_model_document
-from hystmpc.models.identification import FAMILIES, hysteresis_output
+from hystmpc.models.identification import FAMILIES, build_hysteresis, hysteresis_output
 from hystmpc.models.linear_dynamics import KIND_KEYS, LinearDynamics
 from hystmpc.models.prediction import Smoothing, build_prediction_model
 from hystmpc.mpc import InputBounds, NmpcController, NmpcSettings, SolverSettings
@@ -122,11 +122,9 @@ def _frozen(value):
 
 def parameter_class(family: str, parameters: dict, sample_period: float):
     """A frozen dataclass holding ``parameters`` (defaults), validated by building the model."""
-    build = FAMILIES[family].build
-
     def check(self):
         try:
-            build(dataclasses.asdict(self), sample_period)
+            build_hysteresis(family, dataclasses.asdict(self), sample_period)
         except (KeyError, TypeError) as exc:
             raise ValueError(f"bad {family} parameters: {exc}") from None
 
@@ -356,7 +354,7 @@ class ActuatorSpec:
 
     def _configured(self) -> dict:
         """The groups before tuning, the file's tables applied."""
-        cls = parameter_class(self.family, self.identified.parameters, self.sample_period)
+        cls = parameter_class(self.family, self.model_parameters(), self.sample_period)
         model = ActuatorModel(cls(), self.dynamics)
         span_y = self.output_range[1] - self.output_range[0]
         span_u = self.input_bounds[1] - self.input_bounds[0]
@@ -392,9 +390,14 @@ class ActuatorSpec:
             return 3.0 / (d.damping * 2 * np.pi * d.natural_frequency_hz)
         return 3.0 * d.time_constant if d.kind == "first-order" else 0.0
 
+    def model_parameters(self) -> dict:
+        """The model document's parameters, its offsets as ``input_offset`` and ``output_offset``."""
+        return {**self.identified.parameters, "input_offset": self.identified.offsets["input"],
+                "output_offset": self.identified.offsets["output"]}
+
     def hysteresis(self, model: ActuatorModel):
         """``(hysteresis model, creep order)`` of a ``model`` group."""
-        return FAMILIES[self.family].build(dataclasses.asdict(model.hysteresis), self.sample_period)
+        return build_hysteresis(self.family, dataclasses.asdict(model.hysteresis), self.sample_period)
 
     def plant_of(self, model: ActuatorModel, noise: float) -> HysteresisActuator:
         """The exact model as a plant."""
@@ -561,7 +564,7 @@ class ActuatorSpec:
         lo, hi = self.output_range
         span, mid = hi - lo, 0.5 * (lo + hi)
         hysteresis, _ = self.hysteresis(ActuatorModel(
-            parameter_class(self.family, self.identified.parameters, self.sample_period)(), self.dynamics))
+            parameter_class(self.family, self.model_parameters(), self.sample_period)(), self.dynamics))
         rest = float(np.clip(0.0, *self.input_bounds))
         y_rest = float(np.clip(hysteresis.output(hysteresis.initial_state(rest)), lo, hi))
         f, amp = self.sine_hz, 0.4 * span

@@ -132,3 +132,39 @@ def check_smoothing(eps: float, direction_eps: float | None = None, has_directio
         raise ValueError("this model detects no input direction: direction_eps does not apply (leave it unset)")
     if not (np.isfinite(direction_eps) and direction_eps > 0):
         raise ValueError(f"direction_eps must be finite and > 0, got {direction_eps}")
+
+
+def bisection_inverse(model, state, y_target, edges: tuple[float, float], reach: float,
+                      tail_slopes: tuple[float, float] = (0.0, 0.0), iterations: int = 56):
+    """The input that brings ``model``'s output to ``y_target`` from ``state``, and the state
+    after it, on CasADi expressions (the arithmetic of a generated controller): ``(state, u)``.
+
+    For models whose output moves monotonically with the input along a monotone move, and
+    linearly (``tail_slopes``: downwards, upwards) once the move has gone ``reach`` and past
+    ``edges``. ``iterations`` halvings of the move up to that far bound find the input where the
+    target is first reached, to ``2^-iterations`` of the move; beyond it the line is followed,
+    and a target a flat tail cannot reach gives the far bound. The halvings run as a CasADi fold: generated C keeps one
+    loop, not ``iterations`` copies.
+    """
+    n = len(model.state_names)
+    x, target, up = ca.SX.sym("state", n), ca.SX.sym("target"), ca.SX.sym("up")
+    near, far = ca.SX.sym("near"), ca.SX.sym("far")
+
+    def reached(u):
+        y = model.step(x, u)[1]
+        return ca.if_else(up, y >= target, y <= target)
+    mid = 0.5 * (near + far)
+    halve = ca.Function(f"{type(model).__name__.lower()}_bisect", [ca.vertcat(near, far), ca.vertcat(x, target, up)],
+                        [ca.if_else(reached(mid), ca.vertcat(near, mid), ca.vertcat(mid, far))])
+    x, target = ca.MX.sym("state", n), ca.MX.sym("target")  # MX: the fold stays a call
+    rising = target > model.output(x)
+    bound = ca.if_else(rising, ca.fmax(x[0] + reach, edges[1]), ca.fmin(x[0] - reach, edges[0]))
+    bracket = halve.fold(iterations)(ca.vertcat(x[0], bound), ca.vertcat(x, target, rising))
+    y_bound = model.step(x, bound)[1]
+    inside = ca.if_else(rising, y_bound >= target, y_bound <= target)
+    slope = ca.if_else(rising, tail_slopes[1], tail_slopes[0])
+    beyond = ca.if_else(slope > 0, bound + (target - y_bound) / ca.if_else(slope > 0, slope, 1.0), bound)
+    u = ca.if_else(inside, bracket[1], beyond)
+    inverse = ca.Function(f"{type(model).__name__.lower()}_inverse", [x, target], [model.step(x, u)[0], u],
+                          {"never_inline": True})
+    return inverse(state, y_target)

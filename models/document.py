@@ -4,9 +4,9 @@
 "Identification")::
 
     {"schema": "hystmpc.model/1", "family": "prandtl-ishlinskii", "created": ..., "version": ...,
-     "sample_period_s": 0.001, "parameters": {...}, "dynamics": {"kind": "none", ...},
-     "units": {"u": "V", "y": "um"}, "fit": {"rmse": ..., "n_samples": ...},
-     "validation": {...}}
+     "sample_period_s": 0.001, "parameters": {...}, "offsets": {"input": 0.0, "output": ...},
+     "alignment": "next", "dynamics": {"kind": "none", ...}, "units": {"u": "V", "y": "um"},
+     "fit": {"rmse": ..., "n_samples": ...}, "validation": {...}, "candidates": [...]}
 """
 
 from __future__ import annotations
@@ -40,9 +40,16 @@ def model_document(identified: Identified, units: dict | None = None, validation
     doc = {"schema": SCHEMA, "family": identified.family,
            "created": dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"), "version": version,
            "sample_period_s": identified.sample_period, "parameters": _plain(identified.parameters),
+           "offsets": {"input": float(identified.offsets.get("input", 0.0)),
+                       "output": float(identified.offsets.get("output", 0.0))},
+           "alignment": identified.alignment,
            "dynamics": _plain(identified.dynamics.parameters()), "units": dict(units or {"u": "", "y": ""}),
            "fit": {"rmse": identified.rmse, "n_samples": identified.n_samples,
                    "options": _plain(identified.options)}}
+    if "dynamics" in identified.notes:
+        doc["dynamics_fit"] = _plain(identified.notes["dynamics"])
+    if identified.notes.get("at_bounds"):
+        doc["fit"]["at_bounds"] = list(identified.notes["at_bounds"])
     if validation is not None:
         doc["validation"] = validation
     if source:
@@ -116,4 +123,17 @@ def read_model_document(source: str | Path | dict, sample_period: float | None =
         raise ValueError(f"{where}: bad {family} parameters: {exc}") from None
     fit = source.get("fit", {})
     identified.rmse, identified.n_samples = fit.get("rmse", float("nan")), fit.get("n_samples", 0)
+    offsets = source.get("offsets", {})
+    if not isinstance(offsets, dict) or set(offsets) - {"input", "output"} or not all(
+            isinstance(v, int | float) and not isinstance(v, bool) and np.isfinite(v) for v in offsets.values()):
+        raise ValueError(f"{where}: offsets must be a table of finite numbers 'input' and 'output', got {offsets!r}")
+    identified.offsets = {"input": float(offsets.get("input", 0.0)), "output": float(offsets.get("output", 0.0))}
+    alignment = source.get("alignment", "next")
+    if alignment not in ("next", "same"):
+        raise ValueError(f"{where}: alignment {alignment!r}; allowed: next, same")
+    identified.alignment = alignment
+    try:
+        identified.hysteresis()
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: bad offsets: {exc}") from None
     return identified

@@ -1,6 +1,6 @@
 """Fractional-order creep KP (FCKP) model, wang2025 eq. (9): ``W[u] = D^(−α) w[u]``.
 
-``w[u]`` is the KP model (eq. (5)) of the normalised input ``p = 2u/u_max − 1``, shifted and
+``w[u]`` is the KP model (eq. (5)) of the normalised input ``p = 2(u − u_min)/(u_max − u_min) − 1``, shifted and
 scaled to a displacement: ``w = stroke (κ/Σμ + 1)/2``, so zero volts on a demagnetised
 actuator gives zero (the shift is a constant kernel, which eq. (5) allows). The creep is
 the GL fractional *integral* of order α on ``w`` (a constant input rises ∝ t^α, benches.md).
@@ -44,6 +44,8 @@ class FckpParams:
     """Input range [0, u_max] (V into the 1000 V/V amplifier)."""
     sample_period: float = 0.01
     """GL step h (s): the input is held between samples."""
+    u_min: float = 0.0
+    """Lower end of the input range [u_min, u_max] (a bipolar input: below zero)."""
 
     def __post_init__(self):
         if self.levels < 2 or self.max_span < 1:
@@ -52,6 +54,8 @@ class FckpParams:
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be finite and > 0, got {value}")
+        if not (np.isfinite(self.u_min) and self.u_min < self.u_max):
+            raise ValueError(f"u_min must be finite and below u_max = {self.u_max}, got {self.u_min}")
         if not (np.isfinite(self.creep_order) and 0 <= self.creep_order < 1):
             raise ValueError(f"creep_order must be in [0, 1), got {self.creep_order}")
 
@@ -88,11 +92,17 @@ class Fckp(SteppedModel):
 
     def normalise(self, u):
         """Input voltage to the KP input p ∈ [−1, 1]."""
-        return 2.0 * u / self.params.u_max - 1.0
+        lo = self.params.u_min
+        if lo == 0:  # the paper's range [0, u_max], in its own arithmetic
+            return 2.0 * u / self.params.u_max - 1.0
+        return 2.0 * (u - lo) / (self.params.u_max - lo) - 1.0
 
     def denormalise(self, p):
         """KP input back to volts."""
-        return 0.5 * (p + 1.0) * self.params.u_max
+        lo = self.params.u_min
+        if lo == 0:
+            return 0.5 * (p + 1.0) * self.params.u_max
+        return 0.5 * (p + 1.0) * (self.params.u_max - lo) + lo
 
     def static(self, kappa):
         """KP output κ to the creep-free displacement w (mm)."""
@@ -103,7 +113,7 @@ class Fckp(SteppedModel):
         return (2.0 * w / self.params.stroke - 1.0) * self.kp.total_weight
 
     def initial_state(self, u0: float = 0.0) -> np.ndarray:
-        """Demagnetised at ``u0`` volts (default zero: every kernel at −1)."""
+        """Demagnetised at ``u0`` volts (every kernel at −1 at ``u_min``, the default zero)."""
         return self.kp.initial_state(float(self.normalise(u0)))
 
     def output(self, state):
@@ -113,7 +123,7 @@ class Fckp(SteppedModel):
 
     def mean_static_curve(self, n: int = 401) -> tuple[np.ndarray, np.ndarray]:
         """Mean of the rising and falling major-loop branches of w(u): ``(u, w)`` on ``n`` voltages."""
-        u = np.linspace(0.0, self.params.u_max, n)
+        u = np.linspace(self.params.u_min, self.params.u_max, n)
         state = self.initial_state()
         up = np.empty(n)
         for i, v in enumerate(u):
@@ -165,5 +175,5 @@ class Fckp(SteppedModel):
             p_state, p = self.kp.bisection_inverse(state, self.kappa_of(w_target))
             return p_state, self.denormalise(p)
         p_state, p = self.kp.inverse_step(state, float(self.kappa_of(w_target)), -1.0, 1.0,
-                                          step=2.0 * zeta / self.params.u_max)
+                                          step=2.0 * zeta / (self.params.u_max - self.params.u_min))
         return p_state, float(self.denormalise(p))

@@ -121,21 +121,44 @@ class LinearDynamics:
         return {"none": 0.0, "first-order": self.time_constant,
                  "second-order": 2 * self.damping / (2 * np.pi * self.natural_frequency_hz)}[self.kind]
 
-    def response(self, h, sample_period: float) -> np.ndarray:
+    def response(self, h, sample_period: float, from_steady_state: bool = False) -> np.ndarray:
         """Output measured at each sample for the hysteresis output ``h_k`` held from that
-        sample on (zero-order hold; so ``y_k`` depends on ``h_{k-1}`` and earlier), from rest
-        at zero, after the dead time."""
-        from scipy.signal import cont2discrete, lfilter
+        sample on (zero-order hold; so ``y_k`` depends on ``h_{k-1}`` and earlier), after the
+        dead time: from rest at zero, or with ``from_steady_state`` at rest at ``h_0`` (a
+        record that starts with the actuator settled). ``h`` may hold one signal per column."""
+        from scipy.signal import lfilter
 
         h = np.asarray(h, float)
+        start = h[:1] if from_steady_state else None
+        if start is not None:
+            h = h - start
         if self.delay_samples:
-            h = np.concatenate((np.full(self.delay_samples, h[0] if len(h) else 0.0), h))[: len(h)]
+            lead = np.zeros((self.delay_samples, *h.shape[1:])) if start is not None else \
+                np.full((self.delay_samples, *h.shape[1:]), h[0] if len(h) else 0.0)
+            h = np.concatenate((lead, h))[: len(h)]
         if self.kind == "none":
-            return np.concatenate((h[:1], h[:-1]))
-        if self.kind == "first-order":
-            num, den = [1.0], [self.time_constant, 1.0]
+            out = np.concatenate((h[:1], h[:-1]))
         else:
-            wn = 2 * np.pi * self.natural_frequency_hz
-            num, den = [wn**2], [1.0, 2 * self.damping * wn, wn**2]
-        b, a, _ = cont2discrete((num, den), sample_period, method="zoh")
-        return lfilter(np.ravel(b), np.ravel(a), h)
+            out = lfilter(*self.zoh_filter(sample_period), h, axis=0)
+        return out if start is None else out + start
+
+    def zoh_filter(self, sample_period: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(b, a)`` of the block under a zero-order hold, in closed form (a first-order lag's
+        pole ``e^{−T/τ}``; a second-order block's partial fractions over its two poles, exact
+        to about ``1e-16 / |ζ − 1|`` relative, a double pole's own form at ``ζ = 1``)."""
+        if self.kind == "first-order":
+            pole = np.exp(-sample_period / self.time_constant)
+            return np.array([0.0, 1.0 - pole]), np.array([1.0, -pole])
+        wn, zeta = 2 * np.pi * self.natural_frequency_hz, self.damping
+        if abs(zeta - 1.0) < 1e-7:  # a double pole: G(s)/s = 1/s − 1/(s+ω) − ω/(s+ω)²
+            e, wt = np.exp(-wn * sample_period), wn * sample_period
+            return np.array([0.0, 1.0 - e - wt * e, e * e - e + wt * e]), np.array([1.0, -2.0 * e, e * e])
+        root = np.sqrt(complex(zeta * zeta - 1.0))
+        p1, p2 = wn * (-zeta + root), wn * (-zeta - root)
+        r1, r2 = wn**2 / (p1 * (p1 - p2)), wn**2 / (p2 * (p2 - p1))  # G(s)/s = 1/s + r1/(s-p1) + r2/(s-p2)
+        z1, z2 = np.exp(p1 * sample_period), np.exp(p2 * sample_period)
+        # (1 - q)·[1/(1-q) + r1/(1-z1 q) + r2/(1-z2 q)] over (1-z1 q)(1-z2 q), q the delay operator
+        a = np.array([1.0, -(z1 + z2), z1 * z2])
+        b = np.real(a + np.convolve([1.0, -1.0], r1 * np.array([1.0, -z2]) + r2 * np.array([1.0, -z1])))
+        b[0] = 0.0  # no feed-through under a hold (rounding leaves ~1e-13 near ζ = 1)
+        return b, np.real(a)

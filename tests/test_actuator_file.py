@@ -135,6 +135,23 @@ def test_sweep_codegen_and_speed_take_an_actuator_file(piezo, tmp_path):
                  str(tmp_path / "speed"), "--quiet"]) == 0
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("family", ["preisach", "generalised-pi", "bouc-wen"])
+def test_the_new_families_generate_their_whole_controller(piezo, tmp_path, family):
+    """A model of each new family (its output offset included) in an actuator file: the whole
+    controller in C, inverse included, gives the Python controller's inputs."""
+    model = tmp_path / "piezo_model.json"
+    argv = [a if not a.endswith((".csv", ".json")) else str(piezo / a) for a in IDENTIFY[2:-1]]
+    assert main(["identify", family, *argv, str(model), "--quiet", "--no-plots"]) == 0
+    assert json.loads(model.read_text())["offsets"]["output"] != 0
+    shutil.copy(piezo / "piezo.toml", tmp_path / "piezo.toml")
+    report = tmp_path / "codegen.json"
+    assert main(["codegen", str(tmp_path / "piezo.toml"), "--verify", "--duration", "0.1", "--out",
+                 str(tmp_path / "c"), "--json", str(report), "--quiet"]) == 0
+    assert json.loads(report.read_text())["max_input_difference"] == 0.0
+    assert (tmp_path / "c" / "controller" / "piezo_stage.h").exists()
+
+
 def _actuator(folder: Path, text: str) -> str:
     path = folder / "bad.toml"
     path.write_text(text)

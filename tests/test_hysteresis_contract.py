@@ -13,6 +13,7 @@ import pytest
 
 from hystmpc.models import (
     Fckp,
+    FckpParams,
     HysteresisModel,
     MaxwellSlip,
     ParametricHysteresis,
@@ -20,6 +21,10 @@ from hystmpc.models import (
     PrandtlIshlinskii,
     Scaled,
 )
+from hystmpc.models.bouc_wen import BoucWen
+from hystmpc.models.generalised_pi import GeneralisedPI
+from hystmpc.models.preisach import Preisach
+from hystmpc.models.scaled import Offset
 
 RNG = np.random.default_rng
 
@@ -66,6 +71,10 @@ MS = MaxwellSlip(k=(0.0557, 0.0170, 0.0021, 0.0033), w=(0.1680, 0.1383, 0.0342, 
 PI = PrandtlIshlinskii(0.8, (0.5, 1.5, 3.0), (0.4, 0.3, 0.2))
 KP = Fckp().kp
 E_CORE = ParametricHysteresis(p1=0.0071, p2=0.0014 / 1.5e-3)  # katalenic2013 Table 2 at g = 1.5 mm
+PREISACH = Preisach((0.5, 1.5, 3.0), (-2.0, -1.0, 0.0, 1.0, 2.0, 3.0),
+                    tuple(map(tuple, RNG(0).uniform(0.05, 1.0, (4, 5)))))
+GPI = GeneralisedPI(0.5, (0.5, 1.5), (0.3, 0.2), (-2.0, 0.0, 1.0, 3.0), (-1.0, 0.0, 2.0, 2.5))
+BOUC_WEN = BoucWen(0.9, -0.5, 0.8, 0.2)  # the piezo form (A < 0)
 
 CASES = [
     Case("maxwell-slip", MS, _walk(7, 400, 2.5), RNG(3).uniform(-0.99, 0.99, 200) * MS.saturation,
@@ -97,6 +106,23 @@ CASES = [
     Case("fckp", Fckp(), np.clip(_walk(4, 600, 0.05, 3.0), 0.0, 10.0), np.clip(_walk(6, 100, 0.1, 1.5), 0.2, 3.8),
          (1e-2, 1e-3, 1e-4), lambda eps, n: 1.2 * eps * 4.0, 1e-6,
          {"eps": 1e-2, "h": 1e-6, "rtol": 1e-5, "atol": 1e-7}, direction=lambda eps: eps / 10),
+    # kp over a bipolar range (wang2025's grid laid on [-150, 150] V)
+    Case("fckp-bipolar", Fckp(FckpParams(u_min=-150.0, u_max=150.0, creep_order=0.0)),
+         np.clip(_walk(4, 600, 1.5, 0.0), -150.0, 150.0), np.clip(_walk(6, 25, 0.1, 2.0), 0.2, 3.8),
+         (1e-2, 1e-3, 1e-4), lambda eps, n: 1.2 * eps * 4.0, 1e-6,
+         {"eps": 1e-2, "h": 1e-6, "rtol": 1e-5, "atol": 1e-7}, direction=lambda eps: eps / 10),
+    # plays and kinks each err by at most eps/2 (the model's docstring)
+    Case("preisach", PREISACH, _walk(8, 400, 0.5), _walk(9, 200, 0.8, 2.0), (1e-2, 1e-3, 1e-4),
+         lambda eps, n: (n * eps / 2 + eps / 2) * float(np.sum(PREISACH.density)), 1e-9,
+         {"eps": 1e-2, "h": 1e-6, "rtol": 1e-5, "atol": 1e-6}),
+    Case("generalised-pi", GPI, _walk(8, 400, 0.3), _walk(9, 200, 0.3), (1e-2, 1e-3, 1e-4),
+         lambda eps, n: 2.0 * (n * 2 * eps / 2) + 2 * eps, 1e-9, {"eps": 1e-2, "h": 1e-6, "rtol": 1e-5, "atol": 1e-6}),
+    # O(eps), the direction and the side of zeta = 0 blended (the model's docstring)
+    Case("bouc-wen", BOUC_WEN, _walk(8, 400, 0.3), _walk(9, 200, 0.5), (1e-2, 1e-3, 1e-4),
+         lambda eps, n: 0.25 * eps, 1e-9, {"eps": 1e-2, "h": 1e-7, "rtol": 1e-4, "atol": 1e-5}),
+    Case("offset-preisach", Offset(PREISACH, 0.7, -3.0), _walk(8, 400, 0.5), _walk(9, 200, 0.8, -1.0),
+         (1e-2, 1e-3, 1e-4), lambda eps, n: (n * eps / 2 + eps / 2) * float(np.sum(PREISACH.density)), 1e-9,
+         {"eps": 1e-2, "h": 1e-6, "rtol": 1e-5, "atol": 1e-6}),
 ]
 
 

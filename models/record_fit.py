@@ -1,0 +1,386 @@
+"""Simulation-error least squares on a measured record: the engine every family's fit shares.
+
+A candidate model predicts the record as
+
+    ŷ = A(L[Σ_j w_j φ_j(θ)]) + c = Σ_j w_j A(L[φ_j(θ)]) + c,
+
+where the ``φ_j`` are hysteresis-output columns that depend on nonlinear parameters ``θ``
+(thresholds, grid ends, exponents), ``w`` their weights (linear: a PI model's play weights, a
+Preisach density, a stroke), ``L`` the linear block with its dead time (started at its steady
+state, so it passes constants), ``A`` the record's row alignment and ``c`` the output offset.
+Because ``L`` and ``A`` are linear, for given ``θ`` and block the best ``w`` (non-negative where
+the family says) and ``c`` follow from a small constrained least-squares problem; scipy's
+``least_squares`` then moves ``θ`` and the block's parameters on that *projected* residual
+(variable projection). Columns are computed in groups, each depending on a few entries of
+``θ`` (one play's threshold), and cached, so a finite-difference step re-simulates one group.
+
+Row alignment: ``next`` (a sampled control loop: ``y_k`` is measured before ``u_k`` acts, so a
+static model gives ``y_{k+1} = H[u]_k``) or ``same`` (a quasi-static loop tracer: ``y_k = H[u]_k``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hystmpc.models.linear_dynamics import LinearDynamics
+
+ALIGNMENTS = ("next", "same")
+COST_ROWS = 6_000
+"""At most this many evenly spaced samples enter the refinement's cost (every sample is
+simulated); the final weights use every sample."""
+
+
+@dataclass(frozen=True)
+class Record:
+    """A measured record as a fit sees it."""
+
+    u: np.ndarray
+    y: np.ndarray
+    sample_period: float
+    alignment: str = "next"
+    """``next`` or ``same`` (module docstring)."""
+    warm_up: int = 0
+    """Leading samples simulated but left out of the cost (an unknown initial state)."""
+
+    def __post_init__(self):
+        if self.alignment not in ALIGNMENTS:
+            raise ValueError(f"alignment {self.alignment!r}; allowed: {', '.join(ALIGNMENTS)}")
+        if not 0 <= self.warm_up < len(self.u) - 10:
+            raise ValueError(f"warm-up of {self.warm_up} samples leaves fewer than 10 of the {len(self.u)} to fit")
+
+    def rows(self, limit: int | None = COST_ROWS) -> np.ndarray:
+        """The samples of the cost: after the warm-up, at most ``limit`` evenly spaced."""
+        rows = np.arange(self.warm_up, len(self.u))
+        if limit is not None and len(rows) > limit:
+            rows = rows[np.round(np.linspace(0, len(rows) - 1, limit)).astype(int)]
+        return rows
+
+
+# ----- the linear block -------------------------------------------------------------------------------
+
+def block_theta(block: LinearDynamics) -> np.ndarray:
+    """The block's parameters as the refinement moves them (logarithms)."""
+    if block.kind == "first-order":
+        return np.log([block.time_constant])
+    if block.kind == "second-order":
+        return np.log([block.natural_frequency_hz, block.damping])
+    return np.zeros(0)
+
+
+def block_bounds(kind: str, sample_period: float) -> tuple[list[float], list[float]]:
+    """Search bounds of :func:`block_theta` (a lag between a tenth of a sample and 1e4 s; a
+    resonance below Nyquist with a damping from 0.007 to 7)."""
+    if kind == "first-order":
+        return [np.log(sample_period / 10)], [np.log(1e4)]
+    if kind == "second-order":
+        return [np.log(1e-3), -5.0], [np.log(0.5 / sample_period), 2.0]
+    return [], []
+
+
+def block_of(kind: str, theta, delay: int) -> LinearDynamics:
+    """The block of :func:`block_theta` values."""
+    if kind == "first-order":
+        return LinearDynamics("first-order", time_constant=float(np.exp(theta[0])), delay_samples=delay)
+    if kind == "second-order":
+        return LinearDynamics("second-order", natural_frequency_hz=float(np.exp(theta[0])),
+                              damping=float(np.exp(theta[1])), delay_samples=delay)
+    return LinearDynamics("none", delay_samples=delay)
+
+
+def respond(columns: np.ndarray, block: LinearDynamics, record: Record) -> np.ndarray:
+    """What the sensor reads, row by row, for hysteresis outputs ``columns`` (one signal per
+    column): the block from its steady state at each column's first value, the dead time,
+    then the record's row alignment."""
+    columns = np.asarray(columns, float)
+    flat = columns.ndim == 1
+    h = columns[:, None] if flat else columns
+    if record.alignment == "same":
+        h = np.vstack((h, h[-1:]))
+    out = block.response(h, record.sample_period, from_steady_state=True)
+    if record.alignment == "same":
+        out = out[1:]
+    return out[:, 0] if flat else out
+
+
+# ----- the projection ---------------------------------------------------------------------------------
+
+def project(F: np.ndarray, y: np.ndarray, nonneg: np.ndarray, penalty: np.ndarray | None = None,
+            intercept: bool = True) -> tuple[np.ndarray, float]:
+    """Weights ``w`` (non-negative where ``nonneg``) and offset ``c`` minimising
+    ``|y − F w − c|² + |penalty w|²`` (``c = 0`` without ``intercept``)."""
+    return project_normal(F.T @ F, F.T @ y, F.sum(axis=0), float(np.sum(y)), len(y), nonneg, penalty, intercept)
+
+
+def project_normal(FtF, Fty, sum_f, sum_y: float, n: int, nonneg: np.ndarray, penalty: np.ndarray | None = None,
+                   intercept: bool = True) -> tuple[np.ndarray, float]:
+    """:func:`project` from the normal equations' pieces ``FᵀF``, ``Fᵀy``, ``Σ_rows F``, ``Σ y``
+    and the number of rows ``n`` (which the refinement keeps per group of columns)."""
+    from scipy.linalg import cho_factor, cho_solve, solve_triangular
+    from scipy.optimize import nnls
+
+    if len(Fty) == 0:
+        return np.zeros(0), sum_y / n if intercept else 0.0
+    mean_f, mean_y = (sum_f / n, sum_y / n) if intercept else (np.zeros(len(Fty)), 0.0)
+    G = FtF - n * np.outer(mean_f, mean_f)
+    b = Fty - n * mean_f * mean_y
+    norm = np.sqrt(np.maximum(np.diag(G), 0.0))
+    top = max(float(np.max(norm)), 1e-300)
+    scale = np.where(norm > 1e-7 * top, norm, top)  # a column the record leaves constant: left to the penalty
+    G = G / np.outer(scale, scale)
+    b = b / scale
+    if penalty is not None and len(penalty):
+        P = penalty / scale
+        G = G + P.T @ P
+    G[np.diag_indices_from(G)] += 1e-10 * max(float(np.trace(G)), 1e-300) / len(G)
+    if not np.any(nonneg):
+        v = cho_solve(cho_factor(G), b)
+    else:
+        R = np.triu(cho_factor(G, lower=False)[0])
+        target = solve_triangular(R, b, trans="T")
+        free = ~nonneg
+        if np.any(free):  # free weights: two non-negative halves
+            R2 = np.hstack((R, -R[:, free]))
+            v2 = nnls(R2, target, maxiter=50 * R2.shape[1])[0]
+            v = v2[: len(b)].copy()
+            v[free] -= v2[len(b):]
+        else:
+            v = nnls(R, target, maxiter=50 * R.shape[1])[0]
+    w = v / scale
+    return w, mean_y - float(mean_f @ w)
+
+
+# ----- a family's problem -----------------------------------------------------------------------------
+
+@dataclass
+class Problem:
+    """What a family gives the engine: grouped columns, their constraints and its parameters.
+
+    ``groups[g] = (indices, columns)``: ``columns(theta[indices]) -> (n_samples, p_g)``.
+    """
+
+    groups: Sequence[tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]]
+    theta: np.ndarray
+    """The nonlinear parameters' start."""
+    lower: np.ndarray
+    upper: np.ndarray
+    nonneg: np.ndarray
+    """Per column: weight constrained to >= 0."""
+    parameters: Callable[[np.ndarray, np.ndarray], dict]
+    """``(theta, w) -> the document's parameters``."""
+    penalty: Callable[[np.ndarray], np.ndarray] | None = None
+    """``theta -> rows`` added to the weights' least squares (smoothness), or None."""
+    fixed_weights: np.ndarray | None = None
+    """Weights held at these values (only the offset is projected)."""
+    names: tuple[str, ...] = ()
+    """Names of the entries of ``theta`` (for the bound warning)."""
+    intercept: bool = True
+    """The output offset is a constant added to the prediction; False: a family's own column
+    carries it (fckp's, inside the creep)."""
+    iterations: int = 30
+    """Gauss–Newton steps a refinement takes at most."""
+    joint_hold: tuple[int, ...] = ()
+    """Entries of ``theta`` the joint refinement with a linear block leaves where the static one
+    put them (every group depends on them: a Preisach grid's ends)."""
+    _cache: dict = field(default_factory=dict, repr=False)
+    _last: tuple | None = field(default=None, repr=False)
+    _y_rows: tuple | None = field(default=None, repr=False)
+
+    def columns(self, theta: np.ndarray) -> np.ndarray:
+        """Every hysteresis-output column at ``theta`` (unfiltered)."""
+        return np.hstack([fn(np.asarray(theta)[idx]) for idx, fn in self.groups])
+
+    def _group(self, g: int, theta, block: LinearDynamics, record: Record, rows: np.ndarray):
+        """``(key, filtered columns on rows)`` of group ``g``, cached."""
+        idx, fn = self.groups[g]
+        key = (g, tuple(np.asarray(theta)[idx]), block.kind, *block_theta(block), block.delay_samples,
+               record.alignment, len(rows), int(rows[0]), int(rows[-1]))
+        if key not in self._cache:
+            if len(self._cache) > 3 * len(self.groups) + 8:
+                self._cache.clear()
+            self._cache[key] = np.ascontiguousarray(respond(fn(np.asarray(theta)[idx]), block, record)[rows])
+        return key, self._cache[key]
+
+    def responses(self, theta: np.ndarray, block: LinearDynamics, record: Record) -> np.ndarray:
+        """The filtered, aligned columns on every sample (not cached)."""
+        return respond(self.columns(theta), block, record)
+
+    def _normal_equations(self, parts, y: np.ndarray):
+        """``(F, FᵀF, Fᵀy, Σ F)`` for the groups ``parts``, updating the last call's in the
+        columns of the groups that changed (a finite-difference step changes one or two)."""
+        keys = [key for key, _ in parts]
+        widths = [block.shape[1] for _, block in parts]
+        last = self._last
+        if last is None or len(last[0]) != len(keys) or last[1].shape[1] != sum(widths):
+            F = np.hstack([block for _, block in parts])
+            FtF, Fty, sums = F.T @ F, F.T @ y, F.sum(axis=0)
+        else:
+            F, FtF, Fty, sums = (a.copy() for a in last[1:5])
+            edges = np.concatenate(([0], np.cumsum(widths)))
+            changed = [g for g, (old, new) in enumerate(zip(last[0], keys, strict=True)) if old != new]
+            cols = np.concatenate([np.arange(edges[g], edges[g + 1]) for g in changed]) if changed else []
+            for g in changed:
+                F[:, edges[g]:edges[g + 1]] = parts[g][1]
+            if len(cols):
+                rows_block = F[:, cols].T @ F
+                FtF[cols, :] = rows_block
+                FtF[:, cols] = rows_block.T
+                Fty[cols] = F[:, cols].T @ y
+                sums[cols] = F[:, cols].sum(axis=0)
+        self._last = (keys, F, FtF, Fty, sums)
+        return F, FtF, Fty, sums
+
+    def solve(self, theta, block: LinearDynamics, record: Record, rows: np.ndarray):
+        """``(weights, offset, prediction on rows)`` at ``theta`` and ``block``."""
+        parts = [self._group(g, theta, block, record, rows) for g in range(len(self.groups))]
+        y = record.y[rows]
+        if self.fixed_weights is not None:
+            F = np.hstack([part[1] for part in parts])
+            w = self.fixed_weights
+            c = float(np.mean(y - F @ w)) if self.intercept else 0.0
+        else:
+            if self._y_rows is None or self._y_rows[0] is not record or not np.array_equal(self._y_rows[1], rows):
+                self._y_rows = (record, rows, y)
+                self._last = None
+            y = self._y_rows[2]
+            F, FtF, Fty, sums = self._normal_equations(parts, y)
+            w, c = project_normal(FtF, Fty, sums, float(np.sum(y)), len(rows), self.nonneg,
+                                  None if self.penalty is None else self.penalty(theta), self.intercept)
+        return w, c, F @ w + c
+
+
+def with_creep(problem: Problem, record: Record) -> Problem:
+    """``problem`` with a Grünwald–Letnikov creep ``D^(−α)`` after its hysteresis output: every
+    group through the creep, α a new last entry of ``theta`` (in [0, 0.5)), and the output offset
+    a column of ones through the creep (where a model with creep carries it)."""
+    from hystmpc.models.fit_operators import creep_integral
+    if problem.fixed_weights is not None or not problem.intercept:
+        raise ValueError("this family takes no creep of this kind (its scale or offset is its own parameter)")
+    a, n, period = len(problem.theta), len(record.u), record.sample_period
+
+    def through(indices, fn):
+        return np.append(indices, a), lambda t: creep_integral(fn(t[:-1]), float(t[-1]), period)
+    groups = [through(idx, fn) for idx, fn in problem.groups]
+    groups.append((np.array([a]), lambda t: creep_integral(np.ones((n, 1)), float(t[0]), period)))
+
+    def parameters(theta, w):
+        return {**problem.parameters(theta[:-1], w[:-1]), "creep_order": float(theta[-1]),
+                "output_offset": float(w[-1])}
+    return Problem(groups, np.append(problem.theta, 0.01), np.append(problem.lower, 0.0), np.append(problem.upper, 0.5),
+                   np.append(problem.nonneg, False), parameters, problem.penalty and (lambda t: np.hstack((
+                       problem.penalty(t[:-1]), np.zeros((len(problem.penalty(t[:-1])), 1))))),
+                   names=(*problem.names, "creep_order"), intercept=False, iterations=problem.iterations,
+                   joint_hold=problem.joint_hold)
+
+
+@dataclass
+class Fit:
+    """A fitted candidate: parameters, block, offset and how well it fits."""
+
+    theta: np.ndarray
+    block: LinearDynamics
+    weights: np.ndarray
+    offset: float
+    rmse: float
+    at_bounds: tuple[str, ...] = ()
+
+
+def evaluate(problem: Problem, theta, block: LinearDynamics, record: Record) -> Fit:
+    """The fit at ``theta`` and ``block`` with the weights projected on every cost sample."""
+    rows = record.rows(None)
+    w, c, pred = problem.solve(theta, block, record, rows)
+    rmse = float(np.sqrt(np.mean((pred - record.y[rows]) ** 2)))
+    return Fit(np.asarray(theta, float), block, w, c, rmse if np.isfinite(rmse) else np.inf)
+
+
+def refine(problem: Problem, record: Record, block: LinearDynamics, move_block: bool = True,
+           iterations: int | None = None, hold: tuple[int, ...] = ()) -> Fit:
+    """Move ``theta`` (and the block's parameters if ``move_block``) to the least simulation
+    error, the weights and offset projected at each step, for at most ``iterations`` (default:
+    the problem's) Gauss–Newton steps, each one finite-difference Jacobian; the dead time stays. Entries
+    whose bounds coincide, and those in ``hold``, stay where they are."""
+    from scipy.optimize import least_squares
+
+    kind, delay = block.kind, block.delay_samples
+    n_h = len(problem.theta)
+    z0 = np.concatenate((problem.theta, block_theta(block) if move_block else []))
+    lo_d, hi_d = block_bounds(kind, record.sample_period) if move_block else ([], [])
+    lower, upper = np.concatenate((problem.lower, lo_d)), np.concatenate((problem.upper, hi_d))
+    free = lower < upper
+    free[list(hold)] = False
+    width = np.where(np.isfinite(upper - lower), upper - lower, 0.0)
+    z0 = np.where(free, np.clip(z0, lower + 1e-9 * width, upper - 1e-9 * width), z0)
+    rows = record.rows()
+    y = record.y[rows]
+    scale = max(float(np.std(y)), 1e-300)
+
+    def split(z_free):
+        z = z0.copy()
+        z[free] = z_free
+        return z[:n_h], (block_of(kind, z[n_h:], delay) if move_block else block)
+
+    def residual(z_free):
+        theta, blk = split(z_free)
+        with np.errstate(all="ignore"):
+            r = (problem.solve(theta, blk, record, rows)[2] - y) / scale
+        return np.where(np.isfinite(r), r, 1e3)
+
+    z_free = z0[free]
+    if len(z_free):
+        result = least_squares(residual, z_free, bounds=(lower[free], upper[free]), x_scale="jac", xtol=1e-8,
+                               ftol=1e-8, max_nfev=iterations or problem.iterations)
+        z_free = result.x
+    theta, blk = split(z_free)
+    fit = evaluate(problem, theta, blk, record)
+    z = z0.copy()
+    z[free] = z_free
+    near = free & ((np.abs(z - lower) < 1e-6 * width) | (np.abs(upper - z) < 1e-6 * width)) & (width > 0)
+    names = list(problem.names) + (["time_constant"] if kind == "first-order" else
+                                   ["natural_frequency_hz", "damping"] if kind == "second-order" else [])
+    fit.at_bounds = tuple(names[i] if i < len(names) else f"parameter {i}" for i in np.flatnonzero(near))
+    return fit
+
+
+# ----- the dynamics -----------------------------------------------------------------------------------
+
+def _grid(kind: str, record: Record) -> list[np.ndarray]:
+    """Block parameters (:func:`block_theta`) the dead-time search tries: lags from a tenth of a
+    sample to a tenth of the record, resonances from 10 cycles per record to Nyquist."""
+    T, duration = record.sample_period, record.sample_period * len(record.u)
+    if kind == "first-order":
+        return [np.log([tau]) for tau in np.geomspace(0.1 * T, max(0.1 * duration, T), 24)]
+    if kind == "second-order":
+        return [np.log([f, zeta]) for f in np.geomspace(min(10.0 / duration, 0.04 / T), 0.45 / T, 18)
+                for zeta in (0.05, 0.15, 0.35, 0.7, 1.2)]
+    return [np.zeros(0)]
+
+
+def fit_block(h: np.ndarray, record: Record, kind: str, delays: Sequence[int]) -> tuple[LinearDynamics, float]:
+    """The block ``kind`` and dead time (from ``delays``) that best map one hysteresis output
+    ``h`` (gain and offset projected) onto the record: ``(block, rmse)``.
+
+    A grid search (each dead time with every grid block; for a second-order block, the dead
+    times within 2 samples of the best lag's), then a least-squares polish of the best."""
+    rows = record.rows()
+    y = record.y[rows]
+
+    def cost(block):
+        f = respond(h, block, record)[rows]
+        fc, yc = f - f.mean(), y - y.mean()
+        gain = float(fc @ yc) / max(float(fc @ fc), 1e-300)
+        return float(np.mean((yc - gain * fc) ** 2))
+
+    def search(kind, delays):
+        return min(((cost(block_of(kind, z, d)), d, tuple(z)) for d in delays for z in _grid(kind, record)),
+                   key=lambda item: item[0])
+    if kind == "second-order":
+        _, lag_delay, _ = search("first-order", delays)
+        _, delay, z = search(kind, [d for d in delays if abs(d - lag_delay) <= 2] or list(delays))
+    else:
+        _, delay, z = search(kind, delays)
+    problem = Problem([(np.zeros(0, int), lambda _: h[:, None])], np.zeros(0), np.zeros(0), np.zeros(0),
+                      np.array([False]), lambda theta, w: {})
+    fit = refine(problem, record, block_of(kind, np.asarray(z), delay), iterations=15)
+    return fit.block, fit.rmse
