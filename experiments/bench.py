@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from hystmpc.experiments.config import apply_overrides
+from hystmpc.experiments.own_plant import check_plant, describe_plant
 from hystmpc.experiments.runner import Controller, InputGuard, Labels, RunResult, Scenario, simulate
 from hystmpc.mpc.settings import GaussNewtonSettings
 
@@ -111,6 +112,16 @@ class Bench:
         """The simulated plant of ``config``."""
         return self.make_plant(self._groups(config, self.plant_groups, "the plant"))
 
+    def plant_only_groups(self) -> tuple[str, ...]:
+        """The configuration groups only the bench's plant reads (no controller does)."""
+        read_by_controllers = {g for spec in self.controllers.values() for g in spec.groups}
+        return tuple(g for g in self.plant_groups if g not in read_by_controllers)
+
+    def sensors(self, config: dict[str, Any] | None = None) -> tuple[str, ...]:
+        """The measured signals besides ``y`` that the bench's plant gives (a controller may read them)."""
+        config = self.configure() if config is None else config
+        return tuple(self.build_plant(config).reset(0).sensors)
+
     def build_controller(self, name: str, config: dict[str, Any]) -> Controller:
         """Controller ``name`` built from ``config``."""
         if name not in self.controllers:
@@ -148,11 +159,13 @@ class Bench:
             raise ValueError(f"unknown scenario {name!r}; allowed: {', '.join(self.scenarios)}")
         return self.scenarios[name]
 
-    def prepare(self, scenario: Scenario | str, controller: str, config: dict[str, Any] | None = None) -> Prepared:
+    def prepare(self, scenario: Scenario | str, controller: str, config: dict[str, Any] | None = None,
+                plant=None) -> Prepared:
         """The plant and controller for a run, with the scenario's conditions applied.
 
-        Raises ``ValueError`` for settings the plant or controller cannot take, before
-        anything runs.
+        ``plant``: your own plant (a rig, your own simulator) instead of the bench's; see
+        :meth:`run`. Raises ``ValueError`` for settings the plant or controller cannot take,
+        before anything runs.
         """
         scenario = self.scenario(scenario) if isinstance(scenario, str) else scenario
         config = self.configure() if config is None else config
@@ -165,13 +178,21 @@ class Bench:
                 if get_value(config, key) not in (get_value(defaults, key), get_value(fixed, key)):
                     raise ValueError(f"{key}={get_value(config, key)} conflicts with scenario {scenario.name!r}, "
                                      f"which fixes {condition}; use another reference for other conditions")
+            if plant is not None:
+                reaching = [c for c in scenario.conditions if c.split(".", 1)[0] in self.plant_only_groups()]
+                if reaching:
+                    raise ValueError(f"scenario {scenario.name!r} sets {', '.join(reaching)} on the bench's plant, "
+                                     "which your own plant does not read; run it on the bench's plant")
             config = apply_overrides(config, list(scenario.conditions))
-        return Prepared(scenario, controller, config, self.build_plant(config),
-                        self.build_controller(controller, config))
+        if plant is not None:
+            check_plant(plant, self.sample_period, self.sensors(config))
+        return Prepared(scenario, controller, config, self.build_plant(config) if plant is None else plant,
+                        self.build_controller(controller, config), own_plant=plant is not None)
 
     def run(self, scenario: Scenario | str, controller: str, config: dict[str, Any] | None = None, seed: int = 0,
-            duration: float | None = None, progress=None, prepared: Prepared | None = None) -> RunResult:
-        """Run ``controller`` on ``scenario`` against the bench's plant.
+            duration: float | None = None, progress=None, prepared: Prepared | None = None,
+            plant=None) -> RunResult:
+        """Run ``controller`` on ``scenario`` against the bench's plant, or against ``plant``.
 
         Parameters
         ----------
@@ -190,13 +211,24 @@ class Bench:
         prepared : Prepared, optional
             What :meth:`prepare` gave for the same arguments (code-generation checks wrap
             its controller's solver first).
+        plant : Plant, optional
+            Your own plant (a rig, your own simulator; :class:`hystmpc.plants.base.Plant`,
+            checked by :func:`hystmpc.experiments.own_plant.check_plant`) instead of the bench's,
+            or in ``prepared``.
+            The controller is the bench's, tuned as usual; the plant guard still applies.
         """
-        prepared = self.prepare(scenario, controller, config) if prepared is None else prepared
+        if prepared is None:
+            prepared = self.prepare(scenario, controller, config, plant)
+        elif plant is not None and plant is not prepared.plant:
+            raise ValueError("plant= and prepared= name different plants; give the plant to prepare() only")
         from hystmpc.experiments.config import describe
         run = simulate(prepared.plant, prepared.controller, prepared.scenario, duration, seed, name=controller,
                        labels=self.labels, progress=progress, guard=self.guard)
         run.parameters = describe(prepared.config)
         run.paper = self.paper_figures.get((prepared.scenario.name, controller))
+        if prepared.own_plant:  # the bench's plant group did not make this plant, nor is it the paper's
+            run.parameters["plant"] = {"own_plant": describe_plant(prepared.plant)}
+            run.paper = None
         run.bench = self.name
         return run
 
@@ -211,3 +243,5 @@ class Prepared:
     """The configuration with the scenario's conditions applied."""
     plant: Any
     controller: Controller
+    own_plant: bool = False
+    """Whether ``plant`` is the caller's own (a rig, their simulator), not the bench's."""

@@ -18,6 +18,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+import numpy as np
+
 from hystmpc.experiments.bench import MULTIPLE_SHOOTING, Bench
 from hystmpc.experiments.benches import BENCH_NAMES, DEFAULT_BENCH, all_bench_names, get_bench
 from hystmpc.experiments.limits import check_horizons, check_run_samples, run_samples
@@ -55,6 +57,8 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="parameter override, repeatable (e.g. nmpc.horizon=30); 'hystmpc list' names the groups")
     p.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
+    p.add_argument("--plant", metavar="MODULE:CALLABLE", help="your own plant (a rig, your own simulator) instead "
+                   "of the bench's: CALLABLE() from MODULE (a module name or a .py file) returns it (interface.md)")
     p.add_argument("--no-plots", action="store_true", help="skip the figures")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
 
@@ -566,9 +570,10 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
     out = Path(args.out) if args.out else _timestamped(Path("results") / bench.name)
     created = _output_folder(out, overwrite=args.overwrite)
     with _cleanup_on_error(out, created):
+        own_plant = _own_plant(args, bench, config)  # last of the checks: it may open hardware
         if any(c != "nmpc" for c in controllers):
             config = _config(bench, args.overrides)
-        runs = _run_all(args, bench, config, scenarios, controllers, out, total)
+        runs = _run_all(args, bench, config, scenarios, controllers, out, total, own_plant)
     doc = results_document(bench.name, runs, command=sys.argv[1:] if sys.argv else None)
     write_json(doc, out / "results.json")
     _write_json_target(doc, json_target)
@@ -603,6 +608,9 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
                                              + ", ".join(oscillating))
     if not args.quiet and json_target != "-":
         print(table)
+        if own_plant is not None:
+            print(f"\nplant: {runs[0].parameters['plant']['own_plant']} (--plant {args.plant}); the controllers "
+                  "are the bench's, tuned on its nominal model")
         print(f"\nresults: {out / 'results.json'}" + (f" and {args.json_file}" if args.json_file else ""))
         if figures:
             print("figures: " + ", ".join(str(f) for f in figures))
@@ -619,10 +627,48 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
             print("real time: " + r.real_time_verdict())
         if nmpc_runs and any(r.solver["failures"] for r in nmpc_runs):
             print("note: some NMPC solves failed; the fallback input was applied (see solver.failures)")
+    blind = [f"{r.scenario} · {r.controller} ({int(np.sum(~np.isfinite(r.output)))} samples)"
+             for r in runs if not np.all(np.isfinite(r.output))]
+    if blind:  # a plant (a rig, most likely) that measured nothing: the runs are written, the command failed
+        print(f"hystmpc: error: the plant's measurement was not a finite number in {', '.join(blind)}; those "
+              f"runs have no RMSE (results: {out / 'results.json'})", file=sys.stderr)
+        return 1
     return 0
 
 
-def _run_all(args, bench: Bench, config, scenarios, controllers, out: Path, total: int) -> list[RunResult]:
+def _own_plant(args, bench: Bench, config):
+    """The plant ``--plant`` names, checked against the bench (exit 2 otherwise); None without it."""
+    if args.plant is None:
+        return None
+    plant_only = bench.plant_only_groups()
+    ignored = [o.split("=", 1)[0].strip() for o in args.overrides if o.split(".", 1)[0].strip() in plant_only]
+    if ignored:
+        raise UsageError(f"--set {ignored[0]} sets the bench's simulated plant, which --plant replaces; drop it "
+                         "(your plant takes its own settings)")
+    from hystmpc.experiments.own_plant import check_plant, load_plant
+    try:
+        plant = load_plant(args.plant)
+        check_plant(plant, bench.sample_period, bench.sensors(config), who=f"--plant {args.plant}")
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    return plant
+
+
+@contextlib.contextmanager
+def _naming_own_plant(plant, spec: str | None, scenario, controller: str):
+    """An error inside a run on ``--plant``'s plant names the plant and the run (one line, exit 1)."""
+    if plant is None:
+        yield
+        return
+    try:
+        yield
+    except Exception as exc:  # noqa: BLE001 - the user's rig code: any failure, named
+        raise RuntimeError(f"during {scenario.name} · {controller} on --plant {spec}: {type(exc).__name__}: "
+                           f"{exc}") from exc
+
+
+def _run_all(args, bench: Bench, config, scenarios, controllers, out: Path, total: int,
+             own_plant=None) -> list[RunResult]:
     runs: list[RunResult] = []
     from tqdm import tqdm
     with tqdm(total=total, unit="step", disable=True if args.quiet else None, leave=False,
@@ -631,10 +677,10 @@ def _run_all(args, bench: Bench, config, scenarios, controllers, out: Path, tota
             for controller in controllers:
                 bar.set_description(f"{scenario.name} · {controller}")
                 try:
-                    prepared = bench.prepare(scenario, controller, config)
+                    prepared = bench.prepare(scenario, controller, config, own_plant)
                 except ValueError as exc:  # a setting the controller or plant cannot take
                     raise UsageError(str(exc)) from None
-                with _solver_log(out / "solver.log"):
+                with _solver_log(out / "solver.log"), _naming_own_plant(own_plant, args.plant, scenario, controller):
                     run = bench.run(scenario, controller, seed=args.seed, duration=args.duration,
                                     progress=bar.update, prepared=prepared)
                 runs.append(run)

@@ -29,7 +29,8 @@ class Plant(Protocol):
         """Sample period (s)."""
 
     def reset(self, seed: int) -> Measurement:
-        """Back to rest, sensor noise seeded with ``seed``; the first measurement."""
+        """Back to rest, sensor noise seeded with ``seed``; the first measurement, read before
+        any input is applied (a rig holds its rest input, settles, then reads its sensors)."""
 
     def step(self, u: float) -> Measurement:
         """Apply ``u`` for one sample; the measurement at the end of it."""
