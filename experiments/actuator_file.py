@@ -6,15 +6,17 @@ From one file hystmpc builds, for every command that takes a bench:
   creep if the family has one, and the linear block after it (exact zero-order-hold
   discretisation), with the dead time;
 * the **controllers**: ``nmpc``, and the baselines ``pid`` and ``inverse-ff-pid``, whose
-  gains are tuned automatically on the nominal model (:mod:`hystmpc.experiments.tuning`),
-  and ``inverse-lmpc``, the inverse model in series with the input and a linear MPC on the
-  linear block, whose rate weight is tuned the same way;
-* a **simulated plant**: the exact, non-smooth model with every parameter perturbed by a
-  seeded relative ``mismatch`` and sensor noise, so that no controller runs on its own model;
+  gains are tuned automatically on the tuning ensemble (:mod:`hystmpc.experiments.tuning`,
+  :meth:`ActuatorSpec.tuning_ensemble`), and ``inverse-lmpc``, the inverse model in series
+  with the input and a linear MPC on the linear block, whose rate weight is tuned the same way;
+* a **simulated plant**: the exact, non-smooth model (or, with ``plant.truth = runner-up``,
+  the model and the runner-up family of an ``identify auto`` ranking in parallel, blended by
+  what the model missed on the validation record), every parameter perturbed by a seeded
+  relative ``mismatch``, with sensor noise, so that no controller runs on its own model;
 * two **scenarios** from the output range: ``sine`` and ``staircase``.
 
 Groups for ``--set`` (and for optional tables of the same names in the file): ``plant``
-(mismatch, seed, noise), ``model`` (``model.hysteresis.*``: the family's parameters;
+(mismatch, seed, noise, truth), ``model`` (``model.hysteresis.*``: the family's parameters;
 ``model.dynamics.*``), ``nmpc``, ``smoothing``, ``solver``, ``pid``, ``inverse_ff_pid``, ``lmpc``.
 """
 
@@ -44,13 +46,13 @@ from hystmpc.models.prediction import Smoothing, build_prediction_model
 from hystmpc.mpc import InputBounds, NmpcController, NmpcSettings, SolverSettings
 from hystmpc.mpc.linear_mpc import InverseLinearMpc, LinearMpcSettings
 from hystmpc.mpc.rti import user_cache_dir
-from hystmpc.plants.actuator import HysteresisActuator
+from hystmpc.plants.actuator import BlendedActuator, HysteresisActuator
 
 LOG = logging.getLogger("hystmpc")
 _WARNED: set[str] = set()
 """Warnings already given, once per file and process (the output range beyond the model's
 reach: the path; a linear block above Nyquist: the path with "#nyquist")."""
-TUNING_RULE = "mean-rmse-nelder-mead/6"
+TUNING_RULE = "mean-rmse-ensemble-rings-below-3/9"
 """Names the tuning rule in the cache key: change it when the rule changes."""
 LMPC_RATE_FACTORS = (0.01, 0.1, 1.0, 10.0, 100.0, 1e3, 1e4)
 """The rate weights ``inverse-lmpc``'s tuning tries, relative to the default (the NMPC's
@@ -63,7 +65,7 @@ TABLES = {
     "model": {"file"},
     "dynamics": {"kind", "natural_frequency_hz", "damping", "time_constant", "delay_samples"},
     "sensor": {"noise_std"},
-    "plant": {"mismatch", "seed"},
+    "plant": {"mismatch", "seed", "truth"},
     "scenarios": {"sine_hz", "step_s", "duration_s"},
 }
 KEYS = {"name", "description", "sample_period", "output_name", "units", "input_units", "input_bounds",
@@ -94,8 +96,15 @@ class ActuatorPlant:
     """Seed of the perturbation."""
     noise: float = 0.0
     """Sensor noise standard deviation (output units)."""
+    truth: str = "model"
+    """What is perturbed: ``model`` (the controllers' own model), ``runner-up`` (the model and
+    the second family of an ``identify auto`` ranking in parallel, blended by what the model
+    missed on the validation record), or the path of another model document (relative to
+    the actuator file)."""
 
     def __post_init__(self):
+        if not (isinstance(self.truth, str) and self.truth.strip()):
+            raise ValueError(f"truth must be runner-up, model or a model document's path, got {self.truth!r}")
         if not (np.isfinite(self.mismatch) and 0 <= self.mismatch <= 0.5):
             raise ValueError(f"mismatch must be in [0, 0.5], got {self.mismatch}")
         if not (np.isfinite(self.noise) and self.noise >= 0):
@@ -215,8 +224,12 @@ class ActuatorSpec:
         seed = plant.get("seed", 0)
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
             raise self._fail("plant.seed", f"must be an integer >= 0, got {seed!r}")
+        self._document = document
+        self._truths: dict[str, tuple[str, ActuatorModel]] = {}
         try:
-            self.plant = ActuatorPlant(self._number(plant, "mismatch", 0.05, key="plant.mismatch"), seed, self.noise)
+            self.plant = ActuatorPlant(self._number(plant, "mismatch", 0.05, key="plant.mismatch"), seed, self.noise,
+                                       plant.get("truth", "model"))
+            self.truth(self.plant.truth)
         except ValueError as exc:
             raise ValueError(f"{where}: [plant] {exc}") from None
         scen = raw.get("scenarios", {})
@@ -402,20 +415,83 @@ class ActuatorSpec:
         """``(hysteresis model, creep order)`` of a ``model`` group."""
         return build_hysteresis(self.family, dataclasses.asdict(model.hysteresis), self.sample_period)
 
-    def plant_of(self, model: ActuatorModel, noise: float) -> HysteresisActuator:
-        """The exact model as a plant."""
-        hysteresis, creep_order = self.hysteresis(model)
+    def plant_of(self, model: ActuatorModel, noise: float, family: str | None = None) -> HysteresisActuator:
+        """The exact model (of the file's family, or ``family``) as a plant."""
+        hysteresis, creep_order = build_hysteresis(family or self.family, dataclasses.asdict(model.hysteresis),
+                                                   self.sample_period)
         rest = float(np.clip(0.0, *self.input_bounds))
         return HysteresisActuator(hysteresis, self.sample_period,
                                   model.dynamics.discrete(self.sample_period, hold=creep_order > 0),
                                   model.dynamics.delay_samples, noise, self.input_bounds, rest_input=rest,
                                   creep_order=creep_order)
 
-    def make_plant(self, config: dict) -> HysteresisActuator:
-        """The simulated truth: the ``model`` group perturbed by ``plant.mismatch``, with noise."""
+    def _runner_up(self) -> dict | None:
+        """The ranking's row of the second family, with its model document (None without one)."""
+        candidates = self._document.get("candidates")
+        if not isinstance(candidates, list):
+            return None
+        rows = [c for c in candidates if isinstance(c, dict) and isinstance(c.get("model"), dict)
+                and isinstance(c.get("distance_to_best"), int | float)]
+        return rows[1] if len(rows) > 1 else None
+
+    def runner_up_weight(self) -> float:
+        """How far the ``runner-up`` plant moves from the model toward the runner-up, in [0, 1]:
+        the model's validation error without the sensor noise, ``sqrt(v² − σ²)``, over the two
+        models' RMS distance on the validation record, so that the plant differs from the model
+        by what the model missed on the record."""
+        row = self._runner_up()
+        v = float(self._document.get("validation", {}).get("rmse", np.nan))
+        error = np.sqrt(max(v**2 - self.noise**2, 0.0))
+        distance = float(row["distance_to_best"])
+        return float(min(1.0, error / distance)) if np.isfinite(error) and distance > 0 else 1.0
+
+    def truth(self, name: str) -> tuple[str, ActuatorModel] | None:
+        """``(family, model)`` of ``plant.truth`` before the perturbation: the runner-up's model
+        for ``runner-up``, a document's for a path, None for ``model`` (it follows the ``model``
+        group); ``ValueError`` naming what is wrong. A truth's dynamics are the file's
+        ``[dynamics]`` when it has one, else its document's."""
+        if name == "model":
+            return None
+        if name not in self._truths:
+            if name == "runner-up":
+                row = self._runner_up()
+                if row is None:
+                    raise ValueError("plant.truth = 'runner-up' needs a model document written by identify auto with a "
+                                     "second family ranked; allowed here: model, or a model document's path")
+                source = row["model"]
+            else:
+                source = (self.path.parent / name).resolve()
+                if source.suffix != ".json":
+                    raise ValueError(f"plant.truth = {name!r}: allowed: runner-up, model, or a model document's path "
+                                     "(.json)")
+            try:
+                identified = read_model_document(source, self.sample_period)
+            except ValueError as exc:
+                raise ValueError(f"plant.truth = {name!r}: {exc}") from None
+            parameters = {**identified.parameters, "input_offset": identified.offsets["input"],
+                          "output_offset": identified.offsets["output"]}
+            cls = parameter_class(identified.family, parameters, self.sample_period)
+            dynamics = dynamics_from(self.raw["dynamics"], "[dynamics]") if "dynamics" in self.raw \
+                else identified.dynamics
+            self._truths[name] = (identified.family, ActuatorModel(cls(), dynamics))
+        return self._truths[name]
+
+    def make_plant(self, config: dict):
+        """The simulated truth, perturbed by ``plant.mismatch``, with the sensor noise: for
+        ``plant.truth = runner-up`` the ``model`` group and the runner-up in parallel, blended
+        by :meth:`runner_up_weight`; else the truth's model (:meth:`truth`; the ``model`` group
+        for ``model``)."""
         plant: ActuatorPlant = config["plant"]
-        truth = perturb(config["model"], self.family, plant.mismatch, plant.seed)
-        return self.plant_of(truth, plant.noise)
+        noise, mismatch = plant.noise, plant.mismatch
+        truth = self.truth(plant.truth)
+        if truth is None:
+            return self.plant_of(perturb(config["model"], self.family, mismatch, plant.seed), noise)
+        family, model = truth
+        other = perturb(model, family, mismatch, plant.seed)
+        if plant.truth != "runner-up":
+            return self.plant_of(other, noise, family)
+        nominal = self.plant_of(perturb(config["model"], self.family, mismatch, plant.seed), 0.0)
+        return BlendedActuator(nominal, self.plant_of(other, 0.0, family), self.runner_up_weight(), noise)
 
     def build_pid(self, config: dict, feedforward: bool, gains: PidGains | None = None):
         """``pid`` or ``inverse-ff-pid`` on the ``model`` group."""
@@ -489,7 +565,8 @@ class ActuatorSpec:
                                "sample_period": self.sample_period, "bounds": self.input_bounds,
                                "rate": str(self.input_rate), "scenarios": [self.sine_hz, self.step_s, self.duration_s],
                                "output_range": self.output_range, "noise": self.noise,
-                               "lmpc": dataclasses.asdict(config["lmpc"]), "lmpc_factors": LMPC_RATE_FACTORS},
+                               "lmpc": dataclasses.asdict(config["lmpc"]), "lmpc_factors": LMPC_RATE_FACTORS,
+                               "runner_up": self._runner_up()},
                               sort_keys=True, default=str)
         path = user_cache_dir() / f"tuning-{hashlib.sha256(identity.encode()).hexdigest()[:20]}.json"
         try:
@@ -498,7 +575,8 @@ class ActuatorSpec:
                     "lmpc": LinearMpcSettings(**stored["lmpc"])}
         except (OSError, ValueError, KeyError, TypeError):
             pass
-        LOG.info("tuning the baselines of %s on its nominal model (once; cached in %s)", self.name, path.parent)
+        LOG.info("tuning the baselines of %s on its nominal model%s (once; cached in %s)", self.name,
+                 " and the runner-up blend" if self._runner_up() else "", path.parent)
         tuned = self._tune(model, config)
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
@@ -509,6 +587,18 @@ class ActuatorSpec:
             LOG.info("could not cache the tuned gains (%s)", exc)
         return tuned
 
+    def tuning_ensemble(self, model: ActuatorModel, noise: float) -> list:
+        """The plants the baselines are tuned on: the ``model`` group exact, and where the
+        document ranks a runner-up the ``runner-up`` plant unperturbed (the model moved toward
+        the runner-up by :meth:`runner_up_weight`): what the identification knows of the
+        model's error."""
+        plants = [self.plant_of(model, noise)]
+        if self._runner_up() is not None:
+            family, other = self.truth("runner-up")
+            plants.append(BlendedActuator(self.plant_of(model, 0.0), self.plant_of(other, 0.0, family),
+                                          self.runner_up_weight(), noise))
+        return plants
+
     def _tune(self, model: ActuatorModel, config: dict) -> dict[str, Any]:
         from hystmpc.experiments.tuning import coarse_start, mean_rmse, tune_pid
         hysteresis, _ = self.hysteresis(model)
@@ -517,9 +607,9 @@ class ActuatorSpec:
         _, y_hi = hysteresis.step(state, self.input_bounds[1])
         gain = (y_hi - y_lo) / (self.input_bounds[1] - self.input_bounds[0])
         dead = (model.dynamics.delay_samples + 1) * self.sample_period + model.dynamics.lag()
-        plant = self.plant_of(model, 0.0)
+        plants = self.tuning_ensemble(model, 0.0)
         scenarios = list(self.scenarios().values())
-        pid = tune_pid(lambda g: self.build_pid(config | {"model": model}, False, g), plant, scenarios,
+        pid = tune_pid(lambda g: self.build_pid(config | {"model": model}, False, g), plants, scenarios,
                        gain, dead, self.sample_period)[0]
         rule = model.dynamics.delay_samples + 1 + int(round(model.dynamics.lag() / self.sample_period))
 
@@ -531,33 +621,39 @@ class ActuatorSpec:
             def cost(z):
                 gains = PidGains(kp=float(np.exp(z[0])), ki=float(np.exp(z[1])),
                                  derivative_filter=3 * self.sample_period)
-                return mean_rmse(feedforward(preview)(gains), plant, scenarios)
+                return mean_rmse(feedforward(preview)(gains), plants, scenarios)
             return coarse_start(cost, gain, dead, self.sample_period)[1]
         preview = min((rule - 1, rule, rule + 1), key=coarse)
-        gains = tune_pid(feedforward(preview), plant, scenarios, gain, dead, self.sample_period)[0]
+        gains = tune_pid(feedforward(preview), plants, scenarios, gain, dead, self.sample_period)[0]
         return {"pid": pid, "inverse_ff_pid": FeedforwardPidGains(**dataclasses.asdict(gains), preview=preview),
                 "lmpc": self._tune_lmpc(model, config, scenarios)}
 
     def _tune_lmpc(self, model: ActuatorModel, config: dict, scenarios: list[Scenario]) -> LinearMpcSettings:
         """``inverse-lmpc``'s rate weight: of the default times each of :data:`LMPC_RATE_FACTORS`,
-        the one with the least mean RMSE over ``scenarios`` with no oscillating run, on the
-        nominal model with the file's sensor noise (the noise sets how fast it may act), drawn
-        with another seed than the comparison's."""
-        from hystmpc.experiments.runner import simulate
-        plant = self.plant_of(model, self.noise)
+        the one with the least mean RMSE over ``scenarios`` on the tuning ensemble
+        (:meth:`tuning_ensemble`) with no run that rings
+        (:data:`~hystmpc.experiments.tuning.RING_CYCLES`; when every one does, the least mean
+        RMSE, with a warning), with the file's sensor noise (the noise sets how fast it may
+        act), drawn with another seed than the comparison's."""
+        from hystmpc.experiments.tuning import mean_rmse
+        plants = self.tuning_ensemble(model, self.noise)
         base: LinearMpcSettings = config["lmpc"]
-        best, best_cost, best_factor = base, np.inf, None
+        tried = []
         for factor in LMPC_RATE_FACTORS:
             settings = dataclasses.replace(base, r_rate=base.r_rate * factor)
-            runs = [simulate(plant, self.build_inverse_lmpc(config | {"model": model}, settings), scenario,
-                             seed=TUNING_SEED) for scenario in scenarios]
-            cost = float(np.mean([run.metrics["rmse"] for run in runs]))
-            if np.isfinite(cost) and cost < best_cost and not any(run.metrics["oscillating"] for run in runs):
-                best, best_cost, best_factor = settings, cost, factor
-        if not np.isfinite(best_cost):
-            LOG.warning("inverse-lmpc: every rate weight tried oscillated or failed; it keeps the default %.4g "
-                        "(set lmpc.r_rate)", base.r_rate)
-        elif best_factor in (LMPC_RATE_FACTORS[0], LMPC_RATE_FACTORS[-1]):
+            controller = self.build_inverse_lmpc(config | {"model": model}, settings)
+            clean = mean_rmse(controller, plants, scenarios, seed=TUNING_SEED)
+            any_run = clean if np.isfinite(clean) else mean_rmse(controller, plants, scenarios, False, TUNING_SEED)
+            tried.append((clean, any_run, factor, settings))
+        clean, any_run, factor, best = min(tried, key=lambda row: row[:2])
+        if not np.isfinite(any_run):
+            LOG.warning("inverse-lmpc: every rate weight tried failed; it keeps the default %.4g (set lmpc.r_rate)",
+                        base.r_rate)
+            return base
+        if not np.isfinite(clean):
+            LOG.warning("inverse-lmpc: every rate weight tried rings on the tuning ensemble; it takes the one "
+                        "with the least mean RMSE, %.4g (set lmpc.r_rate)", best.r_rate)
+        elif factor in (LMPC_RATE_FACTORS[0], LMPC_RATE_FACTORS[-1]):
             LOG.warning("inverse-lmpc: the tuned rate weight %.4g is at the edge of the grid tried; a better one may "
                         "lie beyond (set lmpc.r_rate)", best.r_rate)
         return best
@@ -593,14 +689,14 @@ class ActuatorSpec:
     def bench(self) -> Bench:
         """The actuator as a :class:`Bench`."""
         controllers = {
-            "pid": ControllerSpec("pid", "PID, gains tuned on the nominal model",
+            "pid": ControllerSpec("pid", "PID, gains tuned on the tuning ensemble",
                                   lambda c: self.build_pid(c, False), ("model", "pid")),
             "inverse-ff-pid": ControllerSpec("inverse-ff-pid", "inverse hysteresis feed-forward + PID, gains tuned "
-                                             "on the nominal model", lambda c: self.build_pid(c, True),
+                                             "on the tuning ensemble", lambda c: self.build_pid(c, True),
                                              ("model", "inverse_ff_pid")),
             "inverse-lmpc": ControllerSpec("inverse-lmpc", "inverse hysteresis model in series with the input + "
-                                           "linear MPC (OSQP) on the linear block, rate weight tuned on the nominal "
-                                           "model", self.build_inverse_lmpc, ("model", "lmpc")),
+                                           "linear MPC (OSQP) on the linear block, rate weight tuned on the tuning "
+                                           "ensemble", self.build_inverse_lmpc, ("model", "lmpc")),
             "nmpc": ControllerSpec("nmpc", "NMPC on the smoothed identified model, inverse warm start",
                                    self.build_nmpc, ("model", "nmpc", "smoothing", "solver")),
         }

@@ -621,7 +621,7 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
             if "inverse-lmpc" in controllers and "lmpc" in config:
                 tuned.append(f"inverse-lmpc: r_rate {config['lmpc'].r_rate:.4g}")
             if tuned:
-                print("baseline gains (tuned on the nominal model unless set): " + "; ".join(tuned))
+                print("baseline gains (tuned on the tuning ensemble unless set): " + "; ".join(tuned))
         nmpc_runs = [r for r in runs if r.solver]
         for r in nmpc_runs:
             print("real time: " + r.real_time_verdict())

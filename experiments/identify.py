@@ -105,7 +105,7 @@ def identify_command(args) -> int:
         if validation is not None:
             val["file"] = str(args.validate)
         doc = model_document(identified, units, val, version(), source=_source(args))
-        doc["candidates"] = [_candidate(c) for c in ranking.candidates]
+        doc["candidates"] = [_candidate(c, units) for c in ranking.candidates]
         doc["reference"] = _candidate(ranking.naive)
     else:
         identified = identify(args.family, u, y, period, options, **common)
@@ -145,15 +145,21 @@ def _source(args) -> dict:
             **({"warm_up": args.warm_up} if args.warm_up else {})}
 
 
-def _candidate(c) -> dict:
+def _candidate(c, units: dict | None = None) -> dict:
+    """A row of the ranking; with ``units``, the candidate's own model document under
+    ``"model"`` (an actuator file's simulated plant may be the runner-up)."""
     row = {"family": c.family, "fit_rmse": c.fit_rmse, "validation_rmse": c.validation_rmse,
            "seconds": round(c.seconds, 2)}
     if c.identified is not None:
         row["alignment"] = c.identified.alignment
         row["dynamics"] = c.identified.dynamics.parameters()
+        row["distance_to_best"] = c.distance_to_best
     if c.error:
         row["error"] = c.error
-    return {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in row.items()}
+    row = {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in row.items()}
+    if units is not None and c.identified is not None and np.isfinite(c.validation_rmse):
+        row["model"] = model_document(c.identified, units, {"rmse": c.validation_rmse})
+    return row
 
 
 def _warn(doc: dict, y) -> None:

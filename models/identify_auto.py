@@ -49,6 +49,9 @@ class Candidate:
     """Why the family gave no model (empty when it did)."""
     model: object = None
     """The naive reference's model (:class:`NaiveModel`), for the naive row only."""
+    distance_to_best: float = float("nan")
+    """RMS difference of its validation prediction from the best candidate's (output units):
+    how far apart two models of the same record are."""
 
 
 @dataclass
@@ -69,16 +72,20 @@ class Ranking:
         return self.candidates[0]
 
 
-def validation_rmse(identified, fit_u, validation: tuple, continue_state: bool, warm_up: int) -> float:
-    """RMSE on the validation record ``(u, y)``: from rest at its first input (its first
+def validation_prediction(identified, fit_u, u_val, continue_state: bool, warm_up: int) -> np.ndarray:
+    """The model's output on the validation inputs: from rest at their first input (the first
     ``warm_up`` samples left out), or continuing the fit record's state."""
-    u_val, y_val = (np.asarray(v, float) for v in validation)
+    u_val = np.asarray(u_val, float)
     if continue_state:
-        predicted = identified.predict(np.concatenate((fit_u, u_val)))[len(fit_u):]
-        skip = 0
-    else:
-        predicted, skip = identified.predict(u_val), warm_up
-    return float(np.sqrt(np.mean((predicted[skip:] - y_val[skip:]) ** 2)))
+        return identified.predict(np.concatenate((fit_u, u_val)))[len(fit_u):]
+    return identified.predict(u_val)[warm_up:]
+
+
+def validation_rmse(identified, fit_u, validation: tuple, continue_state: bool, warm_up: int) -> float:
+    """RMSE on the validation record ``(u, y)`` (:func:`validation_prediction`)."""
+    predicted = validation_prediction(identified, fit_u, validation[0], continue_state, warm_up)
+    y_val = np.asarray(validation[1], float)[len(validation[1]) - len(predicted):]
+    return float(np.sqrt(np.mean((predicted - y_val) ** 2)))
 
 
 @dataclass
@@ -184,4 +191,9 @@ def identify_auto(u, y, sample_period: float, validation: tuple | None = None, c
     ranking = Ranking(ranked, reference, how, len(u))
     if ranked[0].identified is None:
         raise FitError("no family gave a model: " + "; ".join(c.error for c in ranked))
+    best = validation_prediction(ranked[0].identified, u, validation[0], continue_state, warm_up)
+    for candidate in ranked:
+        if candidate.identified is not None:
+            other = validation_prediction(candidate.identified, u, validation[0], continue_state, warm_up)
+            candidate.distance_to_best = float(np.sqrt(np.mean((other - best) ** 2)))
     return ranking

@@ -138,3 +138,53 @@ class HysteresisActuator:
         return Measurement(t=self._t, y=noisy.get("y", y), sensors={n: v for n, v in noisy.items() if n != "y"},
                            truth={"output": y, "hysteresis_output": float(h), "input": self._u,
                                   **{name: float(v) for name, v in zip(dyn.state_names, self._x, strict=True)}})
+
+
+class BlendedActuator:
+    """Two noise-free actuators driven by the same inputs; the output ``(1 − w)·y_a + w·y_b``
+    plus sensor noise. With two models fitted to one record, ``w`` sets how far the plant
+    moves from ``a`` toward ``b``: a truth that differs from a model as much as the actuator
+    does.
+
+    Parameters
+    ----------
+    first, second : HysteresisActuator
+        The two actuators (their own noise is not used).
+    weight : float
+        ``w`` in [0, 1].
+    noise : float
+        Standard deviation of the sensor noise on ``y``.
+    """
+
+    def __init__(self, first: HysteresisActuator, second: HysteresisActuator, weight: float, noise: float = 0.0):
+        if not (np.isfinite(weight) and 0 <= weight <= 1):
+            raise ValueError(f"weight must be in [0, 1], got {weight}")
+        if not (np.isfinite(noise) and noise >= 0):
+            raise ValueError(f"noise must be finite and >= 0, got {noise}")
+        if first.sample_period != second.sample_period:
+            raise ValueError(f"the two actuators' sample periods differ: {first.sample_period} and "
+                             f"{second.sample_period} s")
+        self.first, self.second, self.weight, self.noise = first, second, float(weight), float(noise)
+        self.input_bounds = first.input_bounds
+        self.reset(0)
+
+    @property
+    def sample_period(self) -> float:
+        """Sample period (s)."""
+        return self.first.sample_period
+
+    def reset(self, seed: int) -> Measurement:
+        """Both actuators at rest; seed the noise."""
+        self._rng = np.random.default_rng(seed)
+        return self._blend(self.first.reset(seed), self.second.reset(seed))
+
+    def step(self, u: float) -> Measurement:
+        """Apply the input ``u`` to both for one sample."""
+        return self._blend(self.first.step(u), self.second.step(u))
+
+    def _blend(self, a: Measurement, b: Measurement) -> Measurement:
+        w = self.weight
+        truth = {k: (1 - w) * v + w * b.truth[k] for k, v in a.truth.items() if k in b.truth and k != "input"}
+        truth["input"] = a.truth["input"]
+        y = truth["output"]
+        return Measurement(t=a.t, y=y + self.noise * self._rng.standard_normal(), truth=truth)

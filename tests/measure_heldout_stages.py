@@ -7,7 +7,8 @@ plant (what compare predicts) and on the stage itself (``--plant``, what the rig
 Prints, per stage and reference (the file's sine and staircase, and a band-limited random
 reference), each controller's RMSE on both plants, the NMPC over the best baseline on the stage,
 and whether the simulated plant ranks the controllers as the stage does. Nothing here is tuned
-on the stages; ``--set`` passes settings to both compares (to measure a candidate default).
+on the stages; ``--set`` passes settings to both compares (to measure a candidate default;
+``plant.*`` only to the simulated plant's).
 """
 
 import json
@@ -86,13 +87,24 @@ def compare(out: Path, sets: list[str], tag: str) -> dict:
         factory = "make_" + name.replace("-", "_")
         for plant in ("sim", "stage"):
             own = ["--plant", f"heldout_stages:{factory}"] if plant == "stage" else []
-            for reference in (["sine", "staircase"], ["--reference", str(folder / "random.csv")]):
-                result = folder / tag / f"{plant}-{len(reference)}"
-                _hystmpc("compare", str(folder / "stage.toml"), *reference, *own, *sets, "--out", str(result),
+            given = sets if plant == "sim" else _plantless(sets)
+            for label, reference in (("file", ["sine", "staircase"]),
+                                     ("random", ["--reference", str(folder / "random.csv")])):
+                result = folder / tag / f"{plant}-{label}"
+                _hystmpc("compare", str(folder / "stage.toml"), *reference, *own, *given, "--out", str(result),
                          "--overwrite", "--no-plots", "--quiet")
                 for run in json.loads((result / "results.json").read_text())["runs"]:
                     found[(name, run["scenario"], run["controller"], plant)] = run["metrics"]
     return found
+
+
+def _plantless(sets: list[str]) -> list[str]:
+    """``sets`` without ``--set plant.*`` (the stage is the plant: compare refuses them there)."""
+    kept = []
+    for flag, value in zip(sets[::2], sets[1::2], strict=True):
+        if not value.startswith("plant."):
+            kept += [flag, value]
+    return kept
 
 
 def report(found: dict) -> None:
