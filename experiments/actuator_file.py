@@ -230,6 +230,8 @@ class ActuatorSpec:
             self.plant = ActuatorPlant(self._number(plant, "mismatch", 0.05, key="plant.mismatch"), seed, self.noise,
                                        plant.get("truth", "model"))
             self.truth(self.plant.truth)
+            if self._runner_up() is not None:  # the tuning ensemble has it whatever the truth
+                self.truth("runner-up")
         except ValueError as exc:
             raise ValueError(f"{where}: [plant] {exc}") from None
         scen = raw.get("scenarios", {})
@@ -440,10 +442,13 @@ class ActuatorSpec:
         models' RMS distance on the validation record, so that the plant differs from the model
         by what the model missed on the record."""
         row = self._runner_up()
-        v = float(self._document.get("validation", {}).get("rmse", np.nan))
+        validation = self._document.get("validation")
+        v = validation.get("rmse") if isinstance(validation, dict) else None
+        if not isinstance(v, int | float) or not np.isfinite(v):
+            return 1.0  # no measured error to scale by: the runner-up whole
         error = np.sqrt(max(v**2 - self.noise**2, 0.0))
         distance = float(row["distance_to_best"])
-        return float(min(1.0, error / distance)) if np.isfinite(error) and distance > 0 else 1.0
+        return float(min(1.0, error / distance)) if distance > 0 else 1.0
 
     def truth(self, name: str) -> tuple[str, ActuatorModel] | None:
         """``(family, model)`` of ``plant.truth`` before the perturbation: the runner-up's model
@@ -566,7 +571,8 @@ class ActuatorSpec:
                                "rate": str(self.input_rate), "scenarios": [self.sine_hz, self.step_s, self.duration_s],
                                "output_range": self.output_range, "noise": self.noise,
                                "lmpc": dataclasses.asdict(config["lmpc"]), "lmpc_factors": LMPC_RATE_FACTORS,
-                               "runner_up": self._runner_up()},
+                               "runner_up": self._runner_up(),
+                               "runner_up_weight": self.runner_up_weight() if self._runner_up() else None},
                               sort_keys=True, default=str)
         path = user_cache_dir() / f"tuning-{hashlib.sha256(identity.encode()).hexdigest()[:20]}.json"
         try:
@@ -617,13 +623,17 @@ class ActuatorSpec:
             return lambda g: self.build_pid(config | {"model": model}, True,
                                             FeedforwardPidGains(**dataclasses.asdict(g), preview=preview))
 
-        def coarse(preview):
+        def coarse(preview, reject=True):
             def cost(z):
                 gains = PidGains(kp=float(np.exp(z[0])), ki=float(np.exp(z[1])),
                                  derivative_filter=3 * self.sample_period)
-                return mean_rmse(feedforward(preview)(gains), plants, scenarios)
+                return mean_rmse(feedforward(preview)(gains), plants, scenarios, reject)
             return coarse_start(cost, gain, dead, self.sample_period)[1]
-        preview = min((rule - 1, rule, rule + 1), key=coarse)
+        previews = (rule - 1, rule, rule + 1)
+        costs = {p: coarse(p) for p in previews}
+        if not np.isfinite(min(costs.values())):  # every point rings at every preview: RMSE alone decides
+            costs = {p: coarse(p, False) for p in previews}
+        preview = min(previews, key=costs.get)
         gains = tune_pid(feedforward(preview), plants, scenarios, gain, dead, self.sample_period)[0]
         return {"pid": pid, "inverse_ff_pid": FeedforwardPidGains(**dataclasses.asdict(gains), preview=preview),
                 "lmpc": self._tune_lmpc(model, config, scenarios)}

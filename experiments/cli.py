@@ -610,7 +610,7 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
         print(table)
         if own_plant is not None:
             print(f"\nplant: {runs[0].parameters['plant']['own_plant']} (--plant {args.plant}); the controllers "
-                  "are the bench's, tuned on its nominal model")
+                  "are the bench's, tuned as for compare")
         print(f"\nresults: {out / 'results.json'}" + (f" and {args.json_file}" if args.json_file else ""))
         if figures:
             print("figures: " + ", ".join(str(f) for f in figures))

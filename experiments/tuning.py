@@ -28,6 +28,8 @@ RING_CYCLES = 3.0
 """A tuned candidate rings fewer cycles than this on every run of the ensemble: a margin below
 the :data:`~hystmpc.experiments.metrics.OSCILLATING_CYCLES` that flags a run, for a plant that
 differs from the ensemble (a candidate tuned to the edge rings over it on a 5 % heavier plant)."""
+
+
 def mean_rmse(controller, plants, scenarios: list[Scenario], reject_oscillating: bool = True, seed: int = 0
               ) -> float:
     """Mean RMSE of ``controller`` on ``scenarios`` against each of ``plants`` (one plant or a
@@ -103,7 +105,8 @@ def tune_pid(build: Callable[[PidGains], object], plant, scenarios: list[Scenari
 
     start, start_cost = coarse_start(cost, static_gain, dead_time, sample_period)
     if not np.isfinite(start_cost) and reject_oscillating:
-        LOG.warning("every PID gain of the coarse grid rings on the tuning ensemble; tuning without that test")
+        LOG.warning("every PID gain of the coarse grid rings or fails on the tuning ensemble; tuning without the "
+                    "ringing test")
         return tune_pid(build, plant, scenarios, static_gain, dead_time, sample_period, max_evaluations, stages,
                         reject_oscillating=False)
     theta = max(dead_time, sample_period)

@@ -121,3 +121,11 @@ def test_a_ringing_candidate_is_never_the_cheapest():
     assert np.isfinite(mean_rmse(calm, plant, [steps]))
     assert mean_rmse(wild, plant, [steps]) == np.inf  # it rings: rejected
     assert np.isfinite(mean_rmse(wild, plant, [steps], reject_oscillating=False))
+
+
+def test_a_document_without_a_validation_takes_the_runner_up_whole(tmp_path):
+    path = _ranked_folder(tmp_path)
+    doc = json.loads((tmp_path / "piezo_model.json").read_text())
+    doc["validation"] = None
+    (tmp_path / "piezo_model.json").write_text(json.dumps(doc))
+    assert ActuatorSpec(path).runner_up_weight() == 1.0
