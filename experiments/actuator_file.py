@@ -408,10 +408,12 @@ class ActuatorSpec:
             return 3.0 / (d.damping * 2 * np.pi * d.natural_frequency_hz)
         return 3.0 * d.time_constant if d.kind == "first-order" else 0.0
 
-    def model_parameters(self) -> dict:
-        """The model document's parameters, its offsets as ``input_offset`` and ``output_offset``."""
-        return {**self.identified.parameters, "input_offset": self.identified.offsets["input"],
-                "output_offset": self.identified.offsets["output"]}
+    def model_parameters(self, identified=None) -> dict:
+        """The model document's parameters (or ``identified``'s), its offsets as ``input_offset``
+        and ``output_offset``."""
+        identified = identified or self.identified
+        return {**identified.parameters, "input_offset": identified.offsets["input"],
+                "output_offset": identified.offsets["output"]}
 
     def hysteresis(self, model: ActuatorModel):
         """``(hysteresis model, creep order)`` of a ``model`` group."""
@@ -473,11 +475,8 @@ class ActuatorSpec:
                 identified = read_model_document(source, self.sample_period)
             except ValueError as exc:
                 raise ValueError(f"plant.truth = {name!r}: {exc}") from None
-            parameters = {**identified.parameters, "input_offset": identified.offsets["input"],
-                          "output_offset": identified.offsets["output"]}
-            cls = parameter_class(identified.family, parameters, self.sample_period)
-            dynamics = dynamics_from(self.raw["dynamics"], "[dynamics]") if "dynamics" in self.raw \
-                else identified.dynamics
+            cls = parameter_class(identified.family, self.model_parameters(identified), self.sample_period)
+            dynamics = self.dynamics if "dynamics" in self.raw else identified.dynamics
             self._truths[name] = (identified.family, ActuatorModel(cls(), dynamics))
         return self._truths[name]
 
@@ -487,16 +486,16 @@ class ActuatorSpec:
         by :meth:`runner_up_weight`; else the truth's model (:meth:`truth`; the ``model`` group
         for ``model``)."""
         plant: ActuatorPlant = config["plant"]
-        noise, mismatch = plant.noise, plant.mismatch
+        nominal = perturb(config["model"], self.family, plant.mismatch, plant.seed)
         truth = self.truth(plant.truth)
         if truth is None:
-            return self.plant_of(perturb(config["model"], self.family, mismatch, plant.seed), noise)
+            return self.plant_of(nominal, plant.noise)
         family, model = truth
-        other = perturb(model, family, mismatch, plant.seed)
+        other = perturb(model, family, plant.mismatch, plant.seed)
         if plant.truth != "runner-up":
-            return self.plant_of(other, noise, family)
-        nominal = self.plant_of(perturb(config["model"], self.family, mismatch, plant.seed), 0.0)
-        return BlendedActuator(nominal, self.plant_of(other, 0.0, family), self.runner_up_weight(), noise)
+            return self.plant_of(other, plant.noise, family)
+        return BlendedActuator(self.plant_of(nominal, 0.0), self.plant_of(other, 0.0, family),
+                               self.runner_up_weight(), plant.noise)
 
     def build_pid(self, config: dict, feedforward: bool, gains: PidGains | None = None):
         """``pid`` or ``inverse-ff-pid`` on the ``model`` group."""
