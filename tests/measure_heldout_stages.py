@@ -2,7 +2,7 @@
 record, ``identify auto``, an actuator file, then ``compare`` twice, on the file's simulated
 plant (what compare predicts) and on the stage itself (``--plant``, what the rig gives).
 
-    python tests/measure_heldout_stages.py OUT_DIR [--set KEY=VALUE ...]
+    python tests/measure_heldout_stages.py OUT_DIR [--only STAGE[,STAGE...]] [--set KEY=VALUE ...]
 
 Prints, per stage and reference (the file's sine and staircase, and a band-limited random
 reference), each controller's RMSE on both plants, the NMPC over the best baseline on the stage,
@@ -25,6 +25,7 @@ SETTINGS = {  # stage: (identify options, output range, units): what a user woul
     "preisach-creep": (["--dynamics", "first-order", "--creep"], (0.0, 12.0), "um"),
     "bouc-wen-resonance": (["--dynamics", "second-order"], (0.0, 8.5), "um"),
     "duhem-lag": (["--dynamics", "first-order"], (-3.0, 2.5), "mm"),
+    "duhem-monotone-lag": (["--dynamics", "first-order"], (-3.5, 2.5), "mm"),
 }
 TESTS = Path(__file__).parent
 
@@ -126,5 +127,12 @@ def report(found: dict) -> None:
 
 if __name__ == "__main__":
     out_dir, extra = Path(sys.argv[1]), sys.argv[2:]
+    if extra[:1] == ["--only"]:
+        chosen = extra[1].split(",")
+        unknown = [name for name in chosen if name not in SETTINGS]
+        if unknown:
+            sys.exit(f"--only: unknown stage {unknown[0]!r}; allowed: {', '.join(SETTINGS)}")
+        SETTINGS = {name: SETTINGS[name] for name in chosen}
+        extra = extra[2:]
     prepare(out_dir)
     report(compare(out_dir, extra, "results" if not extra else "results-" + "-".join(s for s in extra if s != "--set")))

@@ -15,6 +15,7 @@ SETTINGS = {  # what a user would ask for, knowing the actuator's kind
     "bouc-wen-resonance": {"dynamics": "second-order"},
     "rate-dependent-play": {"dynamics": "first-order"},
     "duhem-saturation": {"dynamics": "first-order"},
+    "duhem-monotone": {"dynamics": "first-order"},
 }
 
 
