@@ -412,7 +412,7 @@ class CompiledController:
     name : str
         The controller's C name.
     python_controller : NmpcController
-        The controller it was generated from (for ``horizon`` and the sensor vector).
+        The controller it was generated from (for ``horizon``, the sensor vector and the bounds).
     """
 
     def __init__(self, library: Path, name: str, python_controller):
@@ -420,6 +420,8 @@ class CompiledController:
         self._name, self._python = name, python_controller
         self.horizon = python_controller.horizon
         self.sensor_names = python_controller.sensor_names
+        self.bounds = python_controller.bounds
+        """The input bounds and rate it keeps its inputs within (its generator's ``InputBounds``)."""
         self._lib[f"{name}_controller_size"].restype = ctypes.c_ulong
         size = self._lib[f"{name}_controller_size"]()
         self._ctrl = (ctypes.c_double * (size // 8 + 1))()

@@ -1,7 +1,13 @@
 """Property: whatever the reference (jumps, ramps, values outside the bench's range) and however
 wrong the plant and the model (up to six parameters scaled by 0.5..1.5; in half the loops the
-input limits widened by up to 1.5), no plant ever receives a non-finite or out-of-bound input,
-and every estimate the NMPC loses counts as a failure.
+input limits widened by up to 1.5):
+
+* the NMPC itself asks only for numbers within the bounds and rate it was given, and, unless
+  it was told of a wider input range, within the actuator's (the inputs it *asks for*, before
+  the plant's guard);
+* where it asks for more, the guard clips it, and every such sample is counted in the result;
+* no plant ever receives a non-finite or out-of-bound input;
+* every estimate the NMPC loses counts as a failure.
 
 The quick form draws a few closed loops per bench; the slow form many more.
 """
@@ -23,6 +29,9 @@ SAMPLES = 30
 QUICK_EXAMPLES = {"pam": 2, "compliant": 2, "reluctance": 1, "dea": 2}
 """Closed loops per bench in the default suite (a reluctance example identifies its model: ~10 s)."""
 SLOW_EXAMPLES = 25
+TOLERANCE = 1e-6
+"""How far (a fraction of the input span) a request may pass a bound and still count as within
+it: a QP solver's feasibility tolerance, far below anything an actuator would notice."""
 BASE = {"reluctance": ["identification.duration=0.5"], "pam": ["nmpc.solver=rti"], "compliant": ["nmpc.solver=rti"]}
 """Settings under every example: the reluctance model is identified from shorter simulated
 loops (a quarter of the default), which keeps an example to seconds. pam and compliant run
@@ -46,6 +55,25 @@ class RecordingPlant:
     def step(self, u):
         self.inputs.append(u)
         return self.plant.step(u)
+
+
+class RecordingController:
+    """A controller that keeps every input it asks for."""
+
+    def __init__(self, controller):
+        self.controller, self.requests = controller, []
+
+    def __getattr__(self, name):
+        return getattr(self.controller, name)
+
+    def reset(self):
+        self.requests = []
+        return self.controller.reset()
+
+    def step(self, measurement, reference):
+        u = self.controller.step(measurement, reference)
+        self.requests.append(float(u))
+        return u
 
 
 def _perturbable(bench) -> list[str]:
@@ -98,10 +126,23 @@ def _check(bench, factors, reference, noise, seed):
         prepared = bench.prepare(bench.default_scenario, "nmpc", config)
     except ValueError:
         reject()  # a parameter set the bench refuses (with a clear error): not a closed loop
-    plant = RecordingPlant(prepared.plant)
-    run = simulate(plant, prepared.controller, reference, seed=seed, name="nmpc", guard=bench.guard)
-    inputs = np.asarray(plant.inputs)
+    plant, controller = RecordingPlant(prepared.plant), RecordingController(prepared.controller)
+    run = simulate(plant, controller, reference, seed=seed, name="nmpc", guard=bench.guard)
     lo, hi = bench.input_bounds
+    asked = np.asarray(controller.requests)
+    assert np.all(np.isfinite(asked)), f"the NMPC asked for {asked[~np.isfinite(asked)][0]}"
+    slack = TOLERANCE * (hi - lo)
+    own = prepared.controller.bounds  # what the NMPC was told, widened or not
+    assert np.all((asked >= own.lower - slack) & (asked <= own.upper + slack)), (asked.min(), asked.max(), own)
+    if np.isfinite(own.rate):
+        assert np.all(np.abs(np.diff(asked)) <= own.rate + slack), np.abs(np.diff(asked)).max()
+    if not any(factors.get(k, 1.0) > 1.0 for k in _limits(bench)):
+        assert np.all((asked >= lo - slack) & (asked <= hi + slack)), (asked.min(), asked.max(), lo, hi)
+        if np.isfinite(bench.input_rate):
+            assert np.all(np.abs(np.diff(asked)) <= bench.input_rate + slack), np.abs(np.diff(asked)).max()
+    changed = np.abs(run.input - asked) > 1e-12 * np.maximum(1.0, np.abs(asked))
+    assert run.guard["clips"] == int(np.count_nonzero(changed)), (run.guard["clips"], np.count_nonzero(changed))
+    inputs = np.asarray(plant.inputs)
     assert np.all(np.isfinite(inputs)), inputs
     assert np.all((inputs >= lo) & (inputs <= hi)), (inputs.min(), inputs.max())
     if np.isfinite(bench.input_rate):
