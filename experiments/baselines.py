@@ -135,6 +135,7 @@ class PidController:
         return self.pid.update(float(ref_window[0]) - measurement.y, ff)
 
     def stats(self) -> None:
+        """None: nothing is solved."""
         return None
 
 
@@ -412,4 +413,5 @@ class Replay:
         return u
 
     def stats(self) -> None:
+        """None: nothing is solved."""
         return None

@@ -32,11 +32,14 @@ class Controller(Protocol):
     horizon: int
     """Future reference samples the controller wants beyond the current one (0: causal)."""
 
-    def reset(self) -> None: ...
+    def reset(self) -> None:
+        """Forget every past sample: the next ``step`` is a run's first."""
 
-    def step(self, measurement: Measurement, ref_window: np.ndarray) -> float: ...
+    def step(self, measurement: Measurement, ref_window: np.ndarray) -> float:
+        """The input for this sample, from its measurement and ``horizon + 1`` reference samples."""
 
-    def stats(self) -> dict | None: ...
+    def stats(self) -> dict | None:
+        """Solver statistics of the run so far for the result (None: the controller solves nothing)."""
 
 
 @dataclass(frozen=True)
