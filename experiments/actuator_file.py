@@ -44,8 +44,8 @@ from hystmpc.models.identification import FAMILIES, build_hysteresis, hysteresis
 from hystmpc.models.linear_dynamics import KIND_KEYS, LinearDynamics
 from hystmpc.models.prediction import Smoothing, build_prediction_model
 from hystmpc.mpc import InputBounds, NmpcController, NmpcSettings, SolverSettings
+from hystmpc.mpc.codegen import user_cache_dir
 from hystmpc.mpc.linear_mpc import InverseLinearMpc, LinearMpcSettings
-from hystmpc.mpc.rti import user_cache_dir
 from hystmpc.plants.actuator import BlendedActuator, HysteresisActuator
 
 LOG = logging.getLogger("hystmpc")
@@ -153,8 +153,11 @@ def _perturbed(value, rng, mismatch: float):
 
 
 def perturb(model: ActuatorModel, family: str, mismatch: float, seed: int) -> ActuatorModel:
-    """``model`` with the family's parameters (:attr:`Family.mismatch`, polylines' outputs
-    as a whole) and the dynamics' time constants perturbed by ±``mismatch``, seeded."""
+    """``model`` with its parameters and time constants perturbed by ±``mismatch``, seeded.
+
+    The perturbed values are the family's parameters (:attr:`Family.mismatch`, polylines' outputs
+    as a whole) and the dynamics' time constants.
+    """
     rng = np.random.default_rng(seed)
     names = FAMILIES[family].mismatch + (("ascending", "descending") if family == "power-function" else ())
     h = dataclasses.replace(model.hysteresis, **{n: _perturbed(getattr(model.hysteresis, n), rng, mismatch)
@@ -273,9 +276,11 @@ class ActuatorSpec:
         return raw
 
     def _warn_beyond_reach(self) -> None:
-        """A warning (once per file and process) when ``output_range`` reaches well beyond
-        the model's output over a major loop of the input bounds: references there cannot be
-        tracked, by any controller."""
+        """A warning when ``output_range`` reaches well beyond the model's output.
+
+        Given once per file and process; the model's output is taken over a major loop of the input
+        bounds: references there cannot be tracked, by any controller.
+        """
         model, creep_order = self.identified.hysteresis()
         lo, hi = self.input_bounds
         loop = np.concatenate((np.linspace(lo, hi, 200), np.linspace(hi, lo, 200)))
@@ -291,9 +296,11 @@ class ActuatorSpec:
                     "the scenarios' references there cannot be tracked")
 
     def _warn_above_nyquist(self) -> None:
-        """A warning (once per file and process) when a second-order block resonates above
-        what the sample rate resolves: its ringing is aliased. (A first-order lag shorter
-        than a sample is only a static gain and a small delay, which is exact.)"""
+        """Warn (once per file and process) when a second-order block resonates above Nyquist.
+
+        Its ringing is then aliased. (A first-order lag shorter than a sample is only a static
+        gain and a small delay, which is exact.)
+        """
         d, nyquist = self.dynamics, 0.5 / self.sample_period
         if d.kind != "second-order" or d.natural_frequency_hz <= nyquist or f"{self.path}#nyquist" in _WARNED:
             return
@@ -304,9 +311,12 @@ class ActuatorSpec:
                     "controllers cannot resolve it; check the identification, or sample faster")
 
     def _unused_keys(self) -> dict[str, str]:
-        """The keys ``--set`` and the file's tables cannot change, with why: the solver keys this
-        file's NMPC cannot use (a model with creep is solved by single shooting, any other by
-        multiple shooting), the dynamics' kind, and the other kinds' parameters."""
+        """The keys ``--set`` and the file's tables cannot change, with why.
+
+        They are the solver keys this file's NMPC cannot use (a model with creep is solved by single
+        shooting, any other by multiple shooting), the dynamics' kind, and the other kinds'
+        parameters.
+        """
         solver = SINGLE_SHOOTING if self.identified.hysteresis()[1] > 0 else MULTIPLE_SHOOTING
         kind = self.dynamics.kind
         dynamics = {"model.dynamics.kind": f"it is the kind of the file's [dynamics] ({kind}); change it there, "
@@ -391,8 +401,7 @@ class ActuatorSpec:
         return apply_overrides(config, self.overrides, self._unused_keys(), source="table")
 
     def _check_types(self, config: dict) -> None:
-        """A table value of the wrong TOML type (``horizon = "20"``, ``preview = 1``) is refused,
-        not converted."""
+        """A table value of the wrong TOML type (``horizon = "20"``, ``preview = 1``) is refused, not converted."""
         for key, value in self._table_values:
             try:
                 current = get_value(config, key)
@@ -409,8 +418,10 @@ class ActuatorSpec:
         return 3.0 * d.time_constant if d.kind == "first-order" else 0.0
 
     def model_parameters(self, identified=None) -> dict:
-        """The model document's parameters (or ``identified``'s), its offsets as ``input_offset``
-        and ``output_offset``."""
+        """The model document's parameters (or ``identified``'s) and its offsets.
+
+        The offsets come as ``input_offset`` and ``output_offset``.
+        """
         identified = identified or self.identified
         return {**identified.parameters, "input_offset": identified.offsets["input"],
                 "output_offset": identified.offsets["output"]}
@@ -439,10 +450,12 @@ class ActuatorSpec:
         return rows[1] if len(rows) > 1 else None
 
     def runner_up_weight(self) -> float:
-        """How far the ``runner-up`` plant moves from the model toward the runner-up, in [0, 1]:
-        the model's validation error without the sensor noise, ``sqrt(v² − σ²)``, over the two
-        models' RMS distance on the validation record, so that the plant differs from the model
-        by what the model missed on the record."""
+        """How far the ``runner-up`` plant moves from the model toward the runner-up, in [0, 1].
+
+        The weight is the model's validation error without the sensor noise, ``sqrt(v² − σ²)``,
+        over the two models' RMS distance on the validation record, so that the plant differs from
+        the model by what the model missed on the record.
+        """
         row = self._runner_up()
         validation = self._document.get("validation")
         v = validation.get("rmse") if isinstance(validation, dict) else None
@@ -453,10 +466,12 @@ class ActuatorSpec:
         return float(min(1.0, error / distance)) if distance > 0 else 1.0
 
     def truth(self, name: str) -> tuple[str, ActuatorModel] | None:
-        """``(family, model)`` of ``plant.truth`` before the perturbation: the runner-up's model
-        for ``runner-up``, a document's for a path, None for ``model`` (it follows the ``model``
-        group); ``ValueError`` naming what is wrong. A truth's dynamics are the file's
-        ``[dynamics]`` when it has one, else its document's."""
+        """``(family, model)`` of ``plant.truth`` before the perturbation.
+
+        It is the runner-up's model for ``runner-up``, a document's for a path, None for ``model``
+        (it follows the ``model`` group); ``ValueError`` naming what is wrong. A truth's dynamics
+        are the file's ``[dynamics]`` when it has one, else its document's.
+        """
         if name == "model":
             return None
         if name not in self._truths:
@@ -481,10 +496,12 @@ class ActuatorSpec:
         return self._truths[name]
 
     def make_plant(self, config: dict):
-        """The simulated truth, perturbed by ``plant.mismatch``, with the sensor noise: for
-        ``plant.truth = runner-up`` the ``model`` group and the runner-up in parallel, blended
-        by :meth:`runner_up_weight`; else the truth's model (:meth:`truth`; the ``model`` group
-        for ``model``)."""
+        """The simulated truth, perturbed by ``plant.mismatch``, with the sensor noise.
+
+        For ``plant.truth = runner-up`` it is the ``model`` group and the runner-up in parallel,
+        blended by :meth:`runner_up_weight`; else the truth's model (:meth:`truth`; the ``model``
+        group for ``model``).
+        """
         plant: ActuatorPlant = config["plant"]
         nominal = perturb(config["model"], self.family, plant.mismatch, plant.seed)
         truth = self.truth(plant.truth)
@@ -508,8 +525,10 @@ class ActuatorSpec:
                                        preview=gains.preview, rate=self.input_rate)
 
     def _estimator_noise(self) -> float:
-        """The sensor noise the NMPC's EKF and inverse-lmpc's Kalman filter are tuned for
-        (at least 0.1 % of the output range, so that a noise-free file still filters)."""
+        """The sensor noise the NMPC's EKF and inverse-lmpc's Kalman filter are tuned for.
+
+        It is at least 0.1 % of the output range, so that a noise-free file still filters.
+        """
         return max(self.noise, 1e-3 * (self.output_range[1] - self.output_range[0]))
 
     def build_nmpc(self, config: dict) -> NmpcController:
@@ -526,10 +545,12 @@ class ActuatorSpec:
         return NmpcController(pm, bounds, config["nmpc"], config["solver"], sensor_noise=noise)
 
     def build_inverse_lmpc(self, config: dict, settings: LinearMpcSettings | None = None) -> InverseLinearMpc:
-        """``inverse-lmpc`` on the ``model`` group: the exact inverse hysteresis in series with
-        the input (its memory follows the inputs sent) turns a virtual input ``v`` into the
-        input; a linear MPC with an input disturbance (offset-free; creep lands in it) controls
-        the linear block and dead time from ``v``."""
+        """``inverse-lmpc`` on the ``model`` group: the exact inverse hysteresis and a linear MPC.
+
+        The exact inverse hysteresis in series with the input (its memory follows the inputs sent)
+        turns a virtual input ``v`` into the input; a linear MPC with an input disturbance
+        (offset-free; creep lands in it) controls the linear block and dead time from ``v``.
+        """
         model: ActuatorModel = config["model"]
         hysteresis, _ = self.hysteresis(model)
         linear = model.dynamics.virtual_input_model(self.sample_period)
@@ -548,14 +569,15 @@ class ActuatorSpec:
             initial_covariance=initial)
 
     def tuned_gains(self, config: dict) -> dict[str, Any]:
-        """Both PID baselines' gains by :func:`hystmpc.experiments.tuning.tune_pid` on the
-        nominal ``model`` group; for ``inverse-ff-pid`` also its preview: of dead time + one
-        sample + the block's lag and its two neighbours, the one with the best point of the
-        coarse gain grid, before the gains are tuned at it. For ``inverse-lmpc`` its rate
-        weight (:meth:`_tune_lmpc`).
+        """Both PID baselines' gains, ``inverse-ff-pid``'s preview and ``inverse-lmpc``'s rate weight.
+
+        The gains come from :func:`hystmpc.experiments.tuning.tune_pid` on the nominal ``model``
+        group. For ``inverse-ff-pid`` also its preview: of dead time + one sample + the block's
+        lag and its two neighbours, the one with the best point of the coarse gain grid, before
+        the gains are tuned at it. For ``inverse-lmpc`` its rate weight (:meth:`_tune_lmpc`).
 
         Tuning takes seconds to tens of seconds, so the result is kept in memory and on disk
-        (:func:`hystmpc.mpc.rti.user_cache_dir`), keyed by everything it depends on.
+        (:func:`hystmpc.mpc.codegen.user_cache_dir`), keyed by everything it depends on.
         """
         model = config["model"]
         key = repr(model)
@@ -593,10 +615,12 @@ class ActuatorSpec:
         return tuned
 
     def tuning_ensemble(self, model: ActuatorModel, noise: float) -> list:
-        """The plants the baselines are tuned on: the ``model`` group exact, and where the
-        document ranks a runner-up the ``runner-up`` plant unperturbed (the model moved toward
-        the runner-up by :meth:`runner_up_weight`): what the identification knows of the
-        model's error."""
+        """The plants the baselines are tuned on: what the identification knows of the model's error.
+
+        They are the ``model`` group exact, and where the document ranks a runner-up the
+        ``runner-up`` plant unperturbed (the model moved toward the runner-up by
+        :meth:`runner_up_weight`).
+        """
         plants = [self.plant_of(model, noise)]
         if self._runner_up() is not None:
             family, other = self.truth("runner-up")
@@ -638,12 +662,14 @@ class ActuatorSpec:
                 "lmpc": self._tune_lmpc(model, config, scenarios)}
 
     def _tune_lmpc(self, model: ActuatorModel, config: dict, scenarios: list[Scenario]) -> LinearMpcSettings:
-        """``inverse-lmpc``'s rate weight: of the default times each of :data:`LMPC_RATE_FACTORS`,
-        the one with the least mean RMSE over ``scenarios`` on the tuning ensemble
-        (:meth:`tuning_ensemble`) with no run that rings
-        (:data:`~hystmpc.experiments.tuning.RING_CYCLES`; when every one does, the least mean
-        RMSE, with a warning), with the file's sensor noise (the noise sets how fast it may
-        act), drawn with another seed than the comparison's."""
+        """``inverse-lmpc``'s rate weight, chosen among multiples of the default by mean RMSE.
+
+        Of the default times each of :data:`LMPC_RATE_FACTORS`, it is the one with the least mean
+        RMSE over ``scenarios`` on the tuning ensemble (:meth:`tuning_ensemble`) with no run that
+        rings (:data:`~hystmpc.experiments.tuning.RING_CYCLES`; when every one does, the least mean
+        RMSE, with a warning), with the file's sensor noise (the noise sets how fast it may act),
+        drawn with another seed than the comparison's.
+        """
         from hystmpc.experiments.tuning import mean_rmse
         plants = self.tuning_ensemble(model, self.noise)
         base: LinearMpcSettings = config["lmpc"]
@@ -751,8 +777,10 @@ _CACHE: dict[tuple[str, float], Bench] = {}
 
 
 def load_actuator(path: str | Path) -> Bench:
-    """The bench of an actuator file (``ValueError`` naming the bad key); cached per file
-    and modification time, so a command builds and tunes it once."""
+    """The bench of an actuator file (``ValueError`` naming the bad key).
+
+    It is cached per file and modification time, so a command builds and tunes it once.
+    """
     path = Path(path).resolve()
     try:
         stamp = path.stat().st_mtime

@@ -96,9 +96,11 @@ class Bench:
                       self.sensor_units)
 
     def configure(self, assignments=(), tuned: bool = True) -> dict[str, Any]:
-        """The default configuration with ``KEY=VALUE`` assignments applied (``ValueError``
-        naming a bad or fixed key); ``tuned=False``: with :attr:`untuned_defaults` where the
-        bench has them (for the NMPC alone, or to check the settings)."""
+        """The default configuration with ``KEY=VALUE`` assignments applied.
+
+        ``ValueError`` naming a bad or fixed key. ``tuned=False``: with :attr:`untuned_defaults`
+        where the bench has them (for the NMPC alone, or to check the settings).
+        """
         defaults = self.defaults if tuned or self.untuned_defaults is None else self.untuned_defaults
         return apply_overrides(defaults(), list(assignments), self.fixed)
 

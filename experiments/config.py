@@ -66,8 +66,11 @@ def _number(text: str) -> Any:
 
 
 def _assignment(source: str, key: str, text: str, quoted: bool = False) -> str:
-    """How the user wrote an assignment: ``--set KEY=VALUE`` (``quoted``: the value as a
-    Python string) or a table's ``KEY = VALUE`` (the TOML value as written)."""
+    """How the user wrote an assignment.
+
+    ``--set KEY=VALUE`` (``quoted``: the value as a Python string) or a table's ``KEY = VALUE``
+    (the TOML value as written).
+    """
     if source != "--set":
         return f"{key} = {text}"
     return f"--set {key}={text!r}" if quoted else f"--set {key}={text}"
@@ -113,8 +116,11 @@ def _parse(text: str, current: Any, key: str, infinite_ok: bool = False, source:
 
 
 def unknown_key(key: str, config: dict[str, Any], source: str = "--set") -> ValueError:
-    """The error for a key ``config`` does not have: the nearest key, or the group's keys
-    (``source``: how the user gave it, ``--set`` or a file's table)."""
+    """The error for a key ``config`` does not have.
+
+    It names the nearest key, or the group's keys (``source``: how the user gave it, ``--set`` or
+    a file's table).
+    """
     if key in MOVED:
         return ValueError(f"{source} {key} is now {MOVED[key]}")
     group = key.split(".", 1)[0]
@@ -156,8 +162,10 @@ def _match(key: str, allowed: list[str]) -> bool:
 
 def apply_overrides(config: dict[str, Any], assignments: list[str], fixed: dict[str, str] | None = None,
                     source: str = "--set") -> dict[str, Any]:
-    """Return a new configuration with each ``KEY=VALUE`` applied (``source`` names where
-    they came from in the errors: ``--set``, or ``table`` for a file's tables).
+    """Return a new configuration with each ``KEY=VALUE`` applied.
+
+    ``source`` names where they came from in the errors: ``--set``, or ``table`` for a file's
+    tables.
 
     Raises ``ValueError`` naming the bad key (with the nearest allowed one), a key in
     ``fixed`` (with its reason) or the bad value; the dataclasses' own validation then
@@ -208,8 +216,10 @@ def _field_docs(cls) -> dict[str, str]:
 
 
 def key_table(config: dict[str, Any]) -> list[tuple[str, Any, str]]:
-    """Every settable key with its current value and its docstring, cut at 100 characters
-    (units are written there, in parentheses)."""
+    """Every settable key with its current value and its docstring, cut at 100 characters.
+
+    Units are written in the docstring, in parentheses.
+    """
     rows = []
 
     def walk(prefix: str, obj) -> None:

@@ -28,8 +28,10 @@ OVERFIT = 2.0
 
 
 def _options(family: str, assignments: list[str]) -> dict:
-    """The fit options of ``--set NAME=VALUE`` (``FAMILY.NAME=VALUE`` for ``auto``), checked
-    before any work; for ``auto`` a table per family."""
+    """The fit options of ``--set NAME=VALUE``, checked before any work.
+
+    For ``auto`` the keys are ``FAMILY.NAME=VALUE`` and the options a table per family.
+    """
     from hystmpc.models.identification import fit_options
     options: dict = {}
     for assignment in assignments:
@@ -72,8 +74,7 @@ def _check(args) -> int:
 
 
 def identify_command(args) -> int:
-    """Run ``identify`` for a model family or ``auto`` (``args`` from the ``hystmpc`` parser);
-    returns the exit code."""
+    """Run ``identify`` for a model family or ``auto`` (``args`` from the ``hystmpc`` parser); returns the exit code."""
     from hystmpc.experiments.report import version
     max_delay = _check(args)
     options = _options(args.family, args.overrides)
@@ -146,8 +147,11 @@ def _source(args) -> dict:
 
 
 def _candidate(c, units: dict | None = None) -> dict:
-    """A row of the ranking; with ``units``, the candidate's own model document under
-    ``"model"`` (an actuator file's simulated plant may be the runner-up)."""
+    """A row of the ranking.
+
+    With ``units``, it holds the candidate's own model document under ``"model"`` (an actuator
+    file's simulated plant may be the runner-up).
+    """
     row = {"family": c.family, "fit_rmse": c.fit_rmse, "validation_rmse": c.validation_rmse,
            "seconds": round(c.seconds, 2)}
     if c.identified is not None:
@@ -201,8 +205,10 @@ def ranking_table(ranking, units: str) -> str:
 
 
 def model_path(out: str | None, default_name: str = "model.json") -> Path:
-    """``--out``'s model document file (``ValueError`` for a folder; default under
-    ``results/identify/<timestamp>/``)."""
+    """``--out``'s model document file.
+
+    ``ValueError`` for a folder. The default is under ``results/identify/<timestamp>/``.
+    """
     if out is None:
         return Path("results") / "identify" / dt.datetime.now(dt.UTC).strftime("%Y%m%dT%H%M%SZ") / default_name
     path = Path(out)
@@ -274,8 +280,10 @@ def identification_figure(identified, fit: tuple, validation: tuple | None, cont
 
 
 def dynamics_figure(identified, record: tuple, path: Path, units: str) -> Path:
-    """The dynamics' own fit: measured against modelled output on the record they were fitted
-    on, whole and around its fastest input change."""
+    """The dynamics' own fit: measured against modelled output on the record they were fitted on.
+
+    The record is shown whole and around its fastest input change.
+    """
     plt = _plt()
     u, y = (np.asarray(v, float) for v in record)
     model = identified.predict(u)

@@ -58,8 +58,10 @@ def check_horizons(config: dict[str, Any], force: bool) -> None:
 
 
 def check_sweep(n_runs: int, total_samples: int, force: bool) -> None:
-    """``WorkLimitError`` for a sweep above :data:`MAX_SWEEP_RUNS` runs or
-    :data:`MAX_SWEEP_SAMPLES` samples in all (unless ``force``)."""
+    """``WorkLimitError`` for a sweep above the limits on runs or samples (unless ``force``).
+
+    The limits are :data:`MAX_SWEEP_RUNS` runs and :data:`MAX_SWEEP_SAMPLES` samples in all.
+    """
     if force:
         return
     if n_runs > MAX_SWEEP_RUNS:

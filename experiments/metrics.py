@@ -63,15 +63,20 @@ is not; a limit cycle lasts until the reference turns)."""
 
 
 def reversals(signal, threshold: float) -> np.ndarray:
-    """Indices where ``signal`` turns: it has moved back from its last extremum by more than
-    ``threshold`` (a swing smaller than that, e.g. sensor noise, is not a turn)."""
+    """Indices where ``signal`` turns.
+
+    A turn is where it has moved back from its last extremum by more than ``threshold`` (a swing
+    smaller than that, e.g. sensor noise, is not a turn).
+    """
     return _turns(signal, threshold)[0]
 
 
 def noise_level(signal) -> float:
-    """Standard deviation of the white noise on ``signal``, from its second differences
-    (robust: 1.4826 × their median absolute deviation, over √6); a smooth signal gives
-    about 0."""
+    """Standard deviation of the white noise on ``signal``, from its second differences.
+
+    The estimate is robust: 1.4826 × their median absolute deviation, over √6; a smooth signal
+    gives about 0.
+    """
     x = np.asarray(signal, float)
     if len(x) < 3:
         return 0.0
@@ -150,6 +155,8 @@ def oscillation_metrics(t, reference, output, threshold: float = OSCILLATION_THR
 
 
 def input_metrics(u) -> dict[str, float]:
-    """``input_tv``: the input's total variation Σ|u_k − u_{k−1}| (input units): how much the
-    actuator is moved, chattering included."""
+    """``input_tv``: the input's total variation Σ|u_k − u_{k−1}| (input units).
+
+    It measures how much the actuator is moved, chattering included.
+    """
     return {"input_tv": float(np.sum(np.abs(np.diff(np.asarray(u, float)))))}

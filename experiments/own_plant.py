@@ -42,8 +42,10 @@ def load_plant(spec: str) -> Any:
 
 
 def _module(name: str):
-    """Module ``name``, or the ``.py`` file ``name`` loaded as a module of its own (its folder on
-    the path, for its own imports)."""
+    """Module ``name``, or the ``.py`` file ``name`` loaded as a module of its own.
+
+    The file's folder goes on the path, for its own imports.
+    """
     if not name.endswith(".py"):
         if str(Path.cwd()) not in sys.path and "" not in sys.path:
             sys.path.insert(0, str(Path.cwd()))
@@ -65,9 +67,12 @@ def _module(name: str):
 
 
 def check_plant(plant: Any, sample_period: float, expected_sensors=(), who: str = "the plant") -> None:
-    """``ValueError`` unless ``plant`` has the Plant protocol at ``sample_period`` (s) and its
-    first measurement is finite and carries ``expected_sensors`` (the ones the bench's
-    controllers may read). Resets the plant once (seed 0)."""
+    """``ValueError`` unless ``plant`` has the Plant protocol and a usable first measurement.
+
+    The protocol is checked at ``sample_period`` (s); the first measurement must be finite and
+    carry ``expected_sensors`` (the ones the bench's controllers may read). Resets the plant once
+    (seed 0).
+    """
     missing = [m for m in ("sample_period", "reset", "step") if not hasattr(plant, m)]
     if missing:
         raise ValueError(f"{who} lacks {', '.join(missing)} of the Plant protocol (sample_period, "
@@ -92,6 +97,5 @@ def check_plant(plant: Any, sample_period: float, expected_sensors=(), who: str 
 
 
 def describe_plant(plant: Any) -> str:
-    """How a result names a plant that is not the bench's: its ``description`` if it has
-    one, else its class."""
+    """How a result names a plant that is not the bench's: its ``description`` if it has one, else its class."""
     return getattr(plant, "description", None) or f"{type(plant).__module__}.{type(plant).__qualname__}"

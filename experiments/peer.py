@@ -1,5 +1,4 @@
-"""The same NMPC problem in do-mpc and in acados, to check hystmpc against its peers and to
-time them.
+"""The same NMPC problem in do-mpc and in acados, to check hystmpc against its peers and to time them.
 
 Optional: needs the ``bench`` extra (``pip install -e '.[bench]'``). Used by the benchmark
 in :func:`compare_with_do_mpc` and a slow test only.
@@ -76,8 +75,11 @@ def do_mpc_problem(nmpc, solver_options: dict | None = None):
 
 @contextlib.contextmanager
 def _quiet_peer():
-    """do-mpc calls numpy on casadi values, which casadi 3.8 flags with a FutureWarning per
-    call site: not ours to fix, and harmless to the result (checked against hystmpc)."""
+    """Silence do-mpc's warnings (a context manager).
+
+    do-mpc calls numpy on casadi values, which casadi 3.8 flags with a FutureWarning per call
+    site: not ours to fix, and harmless to the result (checked against hystmpc).
+    """
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FutureWarning)
         warnings.simplefilter("ignore", UserWarning)
@@ -182,6 +184,7 @@ class DoMpcController:
         return u
 
     def stats(self) -> None:
+        """None: do-mpc's own statistics are not collected."""
         return None
 
 
@@ -221,7 +224,7 @@ ACADOS_QP_SOLVERS = ("FULL_CONDENSING_QPOASES", "FULL_CONDENSING_HPIPM", "PARTIA
 
 def acados_rti_timing(acados_package, bench_name: str = "pam", qp_solvers=ACADOS_QP_SOLVERS,
                       repeats: int = 3, rounds: int = 2, work=None) -> dict:
-    """acados' SQP_RTI step and hystmpc's generated RTI step on the same recorded problems.
+    """Acados' SQP_RTI step and hystmpc's generated RTI step on the same recorded problems.
 
     hystmpc's controller runs the bench's default scenario (``rti``, every ``(w, p)`` its step
     is called with recorded); acados gets the same OCP: the state augmented with the last
@@ -249,7 +252,8 @@ def acados_rti_timing(acados_package, bench_name: str = "pam", qp_solvers=ACADOS
     from tempfile import TemporaryDirectory
 
     from hystmpc.experiments.benches import get_bench
-    from hystmpc.experiments.realtime import RecordingStep, run_program, write_solver
+    from hystmpc.experiments.realtime import write_solver
+    from hystmpc.mpc.codegen import RecordingStep, run_program
     from hystmpc.mpc.rti import REGULARISATION
 
     package = Path(acados_package).resolve()
@@ -317,7 +321,7 @@ def _restore_environment(key: str, value: str | None) -> None:
 
 
 def _acados_solver(problem, qp: str, folder, regularisation: float, dt: float):
-    """acados' SQP_RTI solver of ``problem`` with the QP solver ``qp``, generated and built in ``folder``."""
+    """Acados' SQP_RTI solver of ``problem`` with the QP solver ``qp``, generated and built in ``folder``."""
     from acados.acados_template import AcadosModel, AcadosOcp, AcadosOcpSolver
     m, s = problem.model, problem.settings
     N, nx, nd = s.horizon, m.nx, m.nd

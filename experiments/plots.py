@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import matplotlib
 
@@ -10,7 +11,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from hystmpc.experiments.runner import RunResult  # noqa: E402
+if TYPE_CHECKING:  # RunResult.plot draws through this module
+    from hystmpc.experiments.runner import RunResult
 
 
 def _finish(fig, path: str | Path | None, dpi: int = 110):

@@ -1,5 +1,8 @@
-"""User CSV files: reference trajectories (interface.md, "Reference CSV") and measured
-records for identification ("Identification")."""
+"""User CSV files: reference trajectories and measured records for identification.
+
+They are described in interface.md: "Reference CSV" for the trajectories, "Identification"
+for the records.
+"""
 
 from __future__ import annotations
 
@@ -102,8 +105,7 @@ def _is_number(text: str) -> bool:
 
 
 def load_record(path: str | Path, what: str = "data file") -> tuple[np.ndarray, np.ndarray, float]:
-    """A measured record for identification: columns ``t``, ``u``, ``y``; returns ``(u, y,
-    sample_period)``.
+    """A measured record for identification: columns ``t``, ``u``, ``y``; returns ``(u, y, sample_period)``.
 
     ``ValueError`` as :func:`read_columns`, and for a time column that is not strictly
     increasing or not uniformly sampled (to 1e-6 of the period), fewer than

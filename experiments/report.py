@@ -6,10 +6,12 @@ import csv
 import datetime as dt
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from hystmpc.experiments.runner import RunResult
+if TYPE_CHECKING:  # runs are made by the runner, which writes itself through json_safe
+    from hystmpc.experiments.runner import RunResult
 
 SCHEMA = "hystmpc.results/1"
 
@@ -29,8 +31,10 @@ ENVIRONMENT_PACKAGES = ("casadi", "numpy", "scipy", "osqp")
 
 
 def environment() -> dict[str, str]:
-    """What else made a result: Python, the numerical libraries' versions and the CPU
-    architecture. The same command can differ in its last digits across these."""
+    """What else made a result: Python, the numerical libraries' versions and the CPU architecture.
+
+    The same command can differ in its last digits across these.
+    """
     import platform
     from importlib.metadata import PackageNotFoundError
     from importlib.metadata import version as _version

@@ -16,6 +16,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from hystmpc.experiments.metrics import input_metrics, oscillation_metrics, step_metrics, tracking_metrics
+from hystmpc.experiments.report import json_safe
 from hystmpc.plants.base import Measurement, Plant
 
 
@@ -108,8 +109,11 @@ class RunResult:
 
     @property
     def timing(self) -> dict[str, float]:
-        """Controller compute per sample (ms): median, p95, max; and median and p95 as a
-        share of the sample period (``real_time``: the median fits in the period)."""
+        """Controller compute per sample (ms): median, p95, max.
+
+        Also the median and p95 as a share of the sample period (``real_time``: the median fits in
+        the period).
+        """
         ms = 1e3 * self.step_times
         median, p95 = float(np.median(ms)), float(np.percentile(ms, 95))
         period_ms = 1e3 * self.sample_period
@@ -118,8 +122,10 @@ class RunResult:
                 "real_time": bool(median <= period_ms)}
 
     def real_time_verdict(self) -> str:
-        """One line: the median and p95 step against the sample period, and whether the
-        controller keeps up with it on this machine (judged on the median)."""
+        """One line: the median and p95 step against the sample period.
+
+        It also says whether the controller keeps up with it on this machine (judged on the median).
+        """
         t = self.timing
         if not t["real_time"]:
             verdict = "NOT real time: the median step exceeds the period"
@@ -133,7 +139,6 @@ class RunResult:
 
     def to_json(self) -> dict[str, Any]:
         """The run as an element of a result document's ``runs`` (interface.md), strict JSON."""
-        from hystmpc.experiments.report import json_safe
         entry: dict[str, Any] = {
             "scenario": self.scenario, "controller": self.controller, "seed": self.seed, "units": self.units,
             "sample_period_s": self.sample_period, "metrics": self.metrics, "timing": self.timing,
@@ -155,7 +160,7 @@ class RunResult:
         ``others`` are more runs on the same reference. Saved to ``path`` if given (returns
         the path), else returned as a matplotlib Figure.
         """
-        from hystmpc.experiments.plots import scenario_figure
+        from hystmpc.experiments.plots import scenario_figure  # here: matplotlib loads only when a figure is drawn
         return scenario_figure([self, *others], path)
 
 

@@ -25,3 +25,29 @@ def staircase(levels, dwell: float):
         k = np.clip((np.asarray(t, float) // dwell).astype(int), 0, len(levels) - 1)
         return levels[k]
     return reference
+
+
+def after_approach(core, approach: float):
+    """``core(t − approach)`` after a raised-cosine approach from 0 to ``core(0)`` lasting ``approach`` s."""
+    start = float(core(np.zeros(1))[0])
+
+    def reference(t):
+        t = np.asarray(t, float)
+        ramp = start * 0.5 * (1 - np.cos(np.pi * np.clip(t / approach, 0.0, 1.0)))
+        return np.where(t < approach, ramp, core(t - approach))
+    return reference
+
+
+def triangle_wave(mean: float, amplitude: float, period: float):
+    """A triangle ``mean ± amplitude`` starting at the mean, rising."""
+    def reference(t):
+        phase = np.mod(np.asarray(t, float) / period + 0.25, 1.0)
+        return mean - amplitude * (4 * np.abs(phase - 0.5) - 1)
+    return reference
+
+
+def square_wave(mean: float, amplitude: float, period: float):
+    """A square wave ``mean ± amplitude``, high for the first half of each period."""
+    def reference(t):
+        return mean + amplitude * np.where(np.mod(np.asarray(t, float), period) < period / 2, 1.0, -1.0)
+    return reference

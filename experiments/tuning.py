@@ -1,5 +1,7 @@
-"""Automatic PID tuning for an actuator hystmpc does not know: the same rule for every
-PID-based baseline, so that a comparison on a new actuator is not against a strawman.
+"""Automatic PID tuning for an actuator hystmpc does not know.
+
+It applies the same rule to every PID-based baseline, so that a comparison on a new actuator
+is not against a strawman.
 
 The rule: minimise the mean RMSE over the actuator's default scenarios on an *ensemble* of
 plants (the nominal model, and where the identification ranked a runner-up the nominal
@@ -32,9 +34,11 @@ differs from the ensemble (a candidate tuned to the edge rings over it on a 5 % 
 
 def mean_rmse(controller, plants, scenarios: list[Scenario], reject_oscillating: bool = True, seed: int = 0
               ) -> float:
-    """Mean RMSE of ``controller`` on ``scenarios`` against each of ``plants`` (one plant or a
-    list); inf if a run is not finite or, with ``reject_oscillating``, rings :data:`RING_CYCLES`
-    cycles or more."""
+    """Mean RMSE of ``controller`` on ``scenarios`` against each of ``plants`` (one plant or a list).
+
+    It is inf if a run is not finite or, with ``reject_oscillating``, rings :data:`RING_CYCLES`
+    cycles or more.
+    """
     rmses = []
     for plant in plants if isinstance(plants, list | tuple) else [plants]:
         for scenario in scenarios:

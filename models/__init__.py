@@ -1,5 +1,6 @@
-"""Hysteresis models (an exact NumPy step, a smooth CasADi step and an inverse for each) and
-the prediction models built from them.
+"""Hysteresis models and the prediction models built from them.
+
+Each hysteresis model has an exact NumPy step, a smooth CasADi step and an inverse.
 
 Every hysteresis model follows :class:`HysteresisModel` (:mod:`hystmpc.models.base`): the
 memory is a state vector passed in and returned, never kept on the object.

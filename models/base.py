@@ -81,15 +81,20 @@ def symbolic(value) -> bool:
 
 
 def clip(value, lower, upper):
-    """``numpy.clip`` on CasADi expressions: a NaN stays NaN (``fmin``/``fmax`` would return a
-    bound), so code generated from a model fails where the NumPy model does."""
+    """``numpy.clip`` on CasADi expressions: a NaN stays NaN.
+
+    Unlike with ``fmin``/``fmax``, which would return a bound, code generated from a model thus
+    fails where the NumPy model does.
+    """
     return ca.if_else(value < lower, lower, ca.if_else(value > upper, upper, value))
 
 
 def interp(x, xp, fp):
-    """``numpy.interp(x, xp, fp)`` for NumPy values, and for a CasADi ``x`` the same formula
-    (the segment's slope times the distance from its left point, plus that point's value; the
-    end values held outside), as nested ``if_else``."""
+    """``numpy.interp(x, xp, fp)`` for NumPy values, and the same formula for a CasADi ``x``.
+
+    For a CasADi ``x`` the formula (the segment's slope times the distance from its left point,
+    plus that point's value; the end values held outside) is built as nested ``if_else``.
+    """
     if not symbolic(x):
         return np.interp(x, xp, fp)
     xp, fp = np.asarray(xp, float), np.asarray(fp, float)
@@ -136,15 +141,16 @@ def check_smoothing(eps: float, direction_eps: float | None = None, has_directio
 
 def bisection_inverse(model, state, y_target, edges: tuple[float, float], reach: float,
                       tail_slopes: tuple[float, float] = (0.0, 0.0), iterations: int = 56):
-    """The input that brings ``model``'s output to ``y_target`` from ``state``, and the state
-    after it, on CasADi expressions (the arithmetic of a generated controller): ``(state, u)``.
+    """The input that brings ``model``'s output to ``y_target`` from ``state``, and the state after it.
+
+    On CasADi expressions (the arithmetic of a generated controller); returns ``(state, u)``.
 
     For models whose output moves monotonically with the input along a monotone move, and
     linearly (``tail_slopes``: downwards, upwards) once the move has gone ``reach`` and past
     ``edges``. ``iterations`` halvings of the move up to that far bound find the input where the
     target is first reached, to ``2^-iterations`` of the move; beyond it the line is followed,
-    and a target a flat tail cannot reach gives the far bound. The halvings run as a CasADi fold: generated C keeps one
-    loop, not ``iterations`` copies.
+    and a target a flat tail cannot reach gives the far bound. The halvings run as a CasADi
+    fold: generated C keeps one loop, not ``iterations`` copies.
     """
     n = len(model.state_names)
     x, target, up = ca.SX.sym("state", n), ca.SX.sym("target"), ca.SX.sym("up")

@@ -75,9 +75,12 @@ class BoucWen(SteppedModel):
         return float(self.linear_gain * state[0] + self.a * state[1])
 
     def _moves(self, z, du, direction, zsign):
-        """On CasADi expressions, for a move ``du`` with the direction ``σ`` and the side of
-        ``ζ = 0`` given (possibly smoothed): ``ζ`` after the move if it stays on its side, ``ζ``
-        after it if it crosses zero, and the input distance to zero."""
+        """What a move ``du`` does to ``ζ``, on CasADi expressions.
+
+        For a move with the direction ``σ`` and the side of ``ζ = 0`` given (possibly smoothed):
+        ``ζ`` after the move if it stays on its side, ``ζ`` after it if it crosses zero, and the
+        input distance to zero.
+        """
         a, beta, gamma = 1.0, self.beta, self.gamma
         k = beta * direction + gamma * zsign
         straight = z * ca.exp(-k * du) + a * du * _phi(k * du)
@@ -107,11 +110,13 @@ class BoucWen(SteppedModel):
         return nxt, self.output(nxt)
 
     def smooth_step(self, eps: float, direction_eps: float | None = None) -> ca.Function:
-        """Smooth step ``(state, u) -> (state_next, y)``: the input's direction
-        ``tanh(Δu / direction_eps)``, the side of ``ζ = 0`` ``tanh(ζ / eps)`` (at ``ζ = 0`` the
-        move's direction, as in the exact step) and the crossing of zero within the move blended
-        over ``eps`` of input (``direction_eps`` defaults to ``eps``). The closed form is kept,
-        so the error is O(eps) and does not grow with the move."""
+        """Smooth step ``(state, u) -> (state_next, y)``.
+
+        Smoothed: the input's direction ``tanh(Δu / direction_eps)``, the side of ``ζ = 0``
+        ``tanh(ζ / eps)`` (at ``ζ = 0`` the move's direction, as in the exact step) and the crossing
+        of zero within the move blended over ``eps`` of input (``direction_eps`` defaults to
+        ``eps``). The closed form is kept, so the error is O(eps) and does not grow with the move.
+        """
         check_smoothing(eps, direction_eps)
         direction_eps = direction_eps or eps
 
@@ -128,14 +133,19 @@ class BoucWen(SteppedModel):
         return smooth_function("bouc_wen_smooth", 2, expressions)
 
     def linear_beyond(self) -> tuple[tuple[float, float], float]:
-        """``(edges, reach)`` for the bisection: after a move of 40 loop widths ``ζ`` is within
-        ``e^-40`` of its bound and the output moves with ``k`` alone."""
+        """``(edges, reach)`` for the bisection.
+
+        After a move of 40 loop widths ``ζ`` is within ``e^-40`` of its bound and the output moves
+        with ``k`` alone.
+        """
         return (np.inf, -np.inf), 40.0 / (self.beta - abs(self.gamma))
 
     def inverse_step(self, state, y_target: float) -> tuple[np.ndarray, float]:
-        """The input that brings the output to ``y_target`` from ``state``, and the state after
-        it: a bisection over a monotone move (NumPy or CasADi). With ``k = 0`` a target beyond
-        the loop's reach gives the input where ``ζ`` has all but reached its bound."""
+        """The input that brings the output to ``y_target`` from ``state``, and the state after it.
+
+        A bisection over a monotone move (NumPy or CasADi). With ``k = 0`` a target beyond the
+        loop's reach gives the input where ``ζ`` has all but reached its bound.
+        """
         if symbolic(state) or symbolic(y_target):
             return bisection_inverse(self, state, y_target, *self.linear_beyond(),
                                      (self.linear_gain, self.linear_gain))

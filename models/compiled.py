@@ -14,8 +14,10 @@ from numba import njit
 
 @njit(cache=True)
 def play_outputs(u, thresholds, z0):
-    """Play operators' outputs ``z_k = clip(z_{k-1}, u_k − r, u_k + r)`` for every threshold
-    ``r`` (columns), from ``z0`` before the first sample."""
+    """Play operators' outputs ``z_k = clip(z_{k-1}, u_k − r, u_k + r)`` for every threshold ``r``.
+
+    One column per threshold ``r``, from ``z0`` before the first sample.
+    """
     n, m = len(u), len(thresholds)
     out = np.empty((n, m))
     z = z0.copy()
@@ -35,8 +37,10 @@ def play_outputs(u, thresholds, z0):
 
 @njit(cache=True)
 def kp_kernel_outputs(p, u_last, rho1, rho2, delta, xi0):
-    """KP kernels' outputs (wang2025 eq. (6)) along the normalised input ``p``, from the
-    last input ``u_last`` and kernel outputs ``xi0``."""
+    """KP kernels' outputs (wang2025 eq. (6)) along the normalised input ``p``.
+
+    From the last input ``u_last`` and kernel outputs ``xi0``.
+    """
     n, m = len(p), len(rho1)
     out = np.empty((n, m))
     xi = xi0.copy()
@@ -70,8 +74,10 @@ def _phi(x):
 
 @njit(cache=True)
 def bouc_wen_advance(z, du, a, beta, gamma):
-    """Bouc–Wen's internal variable after the input moves by ``du`` (exact, n = 1):
-    ``dz/du = a − β sgn(du) z − γ |z|``, crossing ``z = 0`` within the move if it does."""
+    """Bouc–Wen's internal variable after the input moves by ``du`` (exact, n = 1).
+
+    ``dz/du = a − β sgn(du) z − γ |z|``, crossing ``z = 0`` within the move if it does.
+    """
     if du == 0.0:
         return z
     s = 1.0 if du > 0 else -1.0
@@ -119,8 +125,10 @@ def _exponent(s0, gp, gn, lo, hi):
 
 @njit(cache=True)
 def power_function_outputs(s, asc_s, asc_t, desc_s, desc_t, k11, k01, k12, k02, gp, gn, lo, hi):
-    """zhou2024's power-function torque along ``s`` from the resting state at ``s[0]``
-    (:meth:`PowerFunctionHysteresis.step`, sample by sample)."""
+    """zhou2024's power-function torque along ``s`` from the resting state at ``s[0]``.
+
+    The same as :meth:`PowerFunctionHysteresis.step`, sample by sample.
+    """
     n = len(s)
     out = np.empty(n)
     s_last = s[0]
@@ -155,8 +163,10 @@ def power_function_outputs(s, asc_s, asc_t, desc_s, desc_t, k11, k01, k12, k02, 
 
 @njit(cache=True)
 def _lambertw(x):
-    """Principal-branch Lambert W (x >= −1/e): the start of :mod:`hystmpc.models.lambertw`,
-    then Halley steps to convergence."""
+    """Principal-branch Lambert W (x >= −1/e).
+
+    The start of :mod:`hystmpc.models.lambertw`, then Halley steps to convergence.
+    """
     if x == 0.0:
         return 0.0
     if x < -0.25:
@@ -184,8 +194,10 @@ def _lambertw(x):
 
 @njit(cache=True)
 def parametric_outputs(u, p1, p2):
-    """katalenic2013's operator H (eq. (3)) along ``u`` from the demagnetised state at
-    ``u[0]`` (:meth:`ParametricHysteresis.step`, sample by sample)."""
+    """katalenic2013's operator H (eq. (3)) along ``u`` from the demagnetised state at ``u[0]``.
+
+    The same as :meth:`ParametricHysteresis.step`, sample by sample.
+    """
     n = len(u)
     out = np.empty(n)
     u_last = u[0]

@@ -92,8 +92,10 @@ def dynamics_from(spec: dict, where: str) -> LinearDynamics:
 
 
 def read_model_document(source: str | Path | dict, sample_period: float | None = None) -> Identified:
-    """The model of a document (a path or the parsed dict); ``ValueError`` naming what is
-    wrong. ``sample_period`` replaces the document's (a creep model is discretised there)."""
+    """The model of a document (a path or the parsed dict); ``ValueError`` naming what is wrong.
+
+    ``sample_period`` replaces the document's (a creep model is discretised there).
+    """
     where = "model document"
     if not isinstance(source, dict):
         where = f"model file {source}"

@@ -20,7 +20,6 @@ from hystmpc.models.bouc_wen import BoucWen
 from hystmpc.models.fckp import Fckp, FckpParams
 from hystmpc.models.fit_operators import (
     bouc_wen_problem,
-    creep_integral,
     kp_problem,
     parametric_problem,
     power_function_outputs_of,
@@ -32,6 +31,7 @@ from hystmpc.models.fit_plays import (
     prandtl_ishlinskii_problem,
     preisach_problem,
 )
+from hystmpc.models.fractional import creep_integral
 from hystmpc.models.generalised_pi import GeneralisedPI
 from hystmpc.models.maxwell_slip import MaxwellSlip
 from hystmpc.models.parametric import ParametricHysteresis
@@ -61,9 +61,11 @@ class Family:
 
 
 def build_hysteresis(name: str, parameters: dict, sample_period: float):
-    """``(hysteresis model, creep order)`` of family ``name`` from its parameters, with
-    ``input_offset`` and ``output_offset`` (0 when absent) around it, and a ``creep_order``
-    (fitted with ``creep=True``) for families without a creep of their own."""
+    """``(hysteresis model, creep order)`` of family ``name`` from its parameters.
+
+    With ``input_offset`` and ``output_offset`` (0 when absent) around the model, and a
+    ``creep_order`` (fitted with ``creep=True``) for families without a creep of their own.
+    """
     own = {k: v for k, v in parameters.items() if k not in OFFSET_KEYS}
     creep = own.pop("creep_order", None) if name != "fckp" else None
     if creep is not None and not (isinstance(creep, int | float) and 0 <= creep < 1):
@@ -87,8 +89,11 @@ def hysteresis_output(model, creep_order: float, u, sample_period: float) -> np.
 
 
 def compiled_response(model, u) -> np.ndarray | None:
-    """The exact response of ``model`` along ``u`` from ``initial_state(u[0])`` by the compiled
-    recursions of :mod:`hystmpc.models.compiled` (None for a model without one)."""
+    """The exact response of ``model`` along ``u`` from ``initial_state(u[0])``.
+
+    Computed by the compiled recursions of :mod:`hystmpc.models.compiled` (None for a model
+    without one).
+    """
     from hystmpc.models.compiled import bouc_wen_states, kp_kernel_outputs, parametric_outputs, play_outputs
     from hystmpc.models.kp import ridge
 
@@ -204,8 +209,10 @@ def family(name: str) -> Family:
 
 
 def fit_options(name: str, assignments: dict[str, Any]) -> dict[str, Any]:
-    """The family's fit options with ``assignments`` (text or values) applied; ``ValueError``
-    naming an unknown option or a bad value."""
+    """The family's fit options with ``assignments`` (text or values) applied.
+
+    Raises ``ValueError`` naming an unknown option or a bad value.
+    """
     fam = family(name)
     options = dict(fam.options)
     for key, value in assignments.items():

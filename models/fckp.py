@@ -138,13 +138,18 @@ class Fckp(SteppedModel):
         return GrunwaldLetnikov(-self.params.creep_order, self.params.sample_period, window)
 
     def creep_inverse(self, window: int | None = None) -> GrunwaldLetnikov:
-        """A fresh creep-inverse memory: ``D^(+α)``, Section 2.3 (exact inverse of :meth:`creep`
-        for the same h and full memory, since the GL weights of ±α convolve to 1)."""
+        """A fresh creep-inverse memory: ``D^(+α)``, Section 2.3.
+
+        The exact inverse of :meth:`creep` for the same h and full memory, since the GL weights of
+        ±α convolve to 1.
+        """
         return GrunwaldLetnikov(self.params.creep_order, self.params.sample_period, window)
 
     def step(self, state, u: float) -> tuple[np.ndarray, float]:
-        """Exact KP step to voltage ``u``; returns ``(state, w)`` (creep-free, mm). Also on
-        CasADi expressions."""
+        """Exact KP step to voltage ``u``; returns ``(state, w)`` (creep-free, mm).
+
+        Also on CasADi expressions.
+        """
         if symbolic(state) or symbolic(u):
             state, kappa = self.kp.step(state, self.normalise(u))
             return state, self.static(kappa)
@@ -157,8 +162,10 @@ class Fckp(SteppedModel):
         return state, creep.push(w)
 
     def smooth_step(self, eps: float, direction_eps: float | None = None) -> ca.Function:
-        """Smooth KP step in volts ``(state, u) -> (state_next, w)`` (CasADi); see
-        :meth:`KrasnoselskiiPokrovskii.smooth_step` for the error."""
+        """Smooth KP step in volts ``(state, u) -> (state_next, w)`` (CasADi).
+
+        See :meth:`KrasnoselskiiPokrovskii.smooth_step` for the error.
+        """
         inner = self.kp.smooth_step(eps, direction_eps)
 
         def expressions(x, u):
@@ -167,10 +174,12 @@ class Fckp(SteppedModel):
         return smooth_function("fckp_smooth", self.kp.n_kernels + 1, expressions)
 
     def inverse_step(self, state, w_target: float, zeta: float = 0.01) -> tuple[np.ndarray, float]:
-        """Section 3.2: the voltage whose KP output reaches ``w_target``, searched from the
-        last input in steps of ζ (V); returns ``(state, u)``. On CasADi expressions (a generated
-        controller) it bisects instead (:meth:`KrasnoselskiiPokrovskii.bisection_inverse`;
-        ``zeta`` does not apply); both find the same input to about 2e-12 V."""
+        """Section 3.2: the voltage whose KP output reaches ``w_target``; returns ``(state, u)``.
+
+        Searched from the last input in steps of ζ (V). On CasADi expressions (a generated
+        controller) it bisects instead (:meth:`KrasnoselskiiPokrovskii.bisection_inverse`; ``zeta``
+        does not apply); both find the same input to about 2e-12 V.
+        """
         if symbolic(state) or symbolic(w_target):
             p_state, p = self.kp.bisection_inverse(state, self.kappa_of(w_target))
             return p_state, self.denormalise(p)

@@ -1,5 +1,7 @@
-"""Fit problems of the families with their own operators: Bouc–Wen, the parametric operator
-(katalenic2013), KP and FCKP (wang2025) and the power-function model (zhou2024).
+"""Fit problems of the families with their own operators.
+
+These families are Bouc–Wen, the parametric operator (katalenic2013), KP and FCKP (wang2025)
+and the power-function model (zhou2024).
 
 As in :mod:`hystmpc.models.fit_plays`, each returns a
 :class:`~hystmpc.models.record_fit.Problem` for the record; the output's scale (a gain, a
@@ -19,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from hystmpc.models.fractional import creep_integral
 from hystmpc.models.kp import paper_density, ridge, threshold_grid
 from hystmpc.models.linear_dynamics import LinearDynamics
 from hystmpc.models.power_function import PowerFunctionHysteresis
@@ -35,9 +38,11 @@ def _best_start(problem: Problem, record: Record, starts) -> np.ndarray:
 
 
 def bouc_wen_problem(record: Record) -> Problem:
-    """``y = k·u + A·ζ(u; β, γ)``: ``log β`` and ``γ/β`` moved; ``k`` and ``A`` (either sign, the
-    output monotone) projected on the columns ``u``, ``ζ`` and ``m·u − ζ`` with non-negative
-    weights, ``m = 2β/(β+γ)`` the largest ``dζ/du``."""
+    """``y = k·u + A·ζ(u; β, γ)``: ``log β`` and ``γ/β`` moved.
+
+    ``k`` and ``A`` (either sign, the output monotone) projected on the columns ``u``, ``ζ`` and
+    ``m·u − ζ`` with non-negative weights, ``m = 2β/(β+γ)`` the largest ``dζ/du``.
+    """
     u = record.u
     span = float(np.ptp(u))
 
@@ -83,25 +88,14 @@ def parametric_problem(record: Record) -> Problem:
     return problem
 
 
-def creep_integral(w, order: float, sample_period: float) -> np.ndarray:
-    """``D^(−order)`` of ``w`` along its first axis (zero before the first sample) by FFT: the
-    GL sum of :func:`hystmpc.models.fractional.gl_apply` in O(n log n)."""
-    from scipy.signal import fftconvolve
-    w = np.asarray(w, float)
-    if order <= 0:
-        return w
-    n = len(w)
-    weights = np.concatenate(([1.0], np.cumprod(1.0 - (1.0 - order) / np.arange(1, n))))  # gl_weights(-order, n)
-    kernel = weights if w.ndim == 1 else weights[:, None]
-    return sample_period ** order * fftconvolve(w, kernel, axes=0)[:n]
-
-
 def kp_problem(record: Record, creep: bool, levels: int = 12, max_span: int = 2, delta: float = 0.15,
                u_max: float = 0.0, u_min: float = float("nan")) -> Problem:
-    """KP (and FCKP with ``creep``) with the density of wang2025 Fig. 3 on a threshold grid over
-    ``[u_min, u_max]`` (fitted where not given: ``u_max = 0``, ``u_min`` NaN): the stroke and
-    the output offset projected (the offset inside the creep, where the models put it), ``c``,
-    ``σ``, the range's free ends and α moved."""
+    """KP (and FCKP with ``creep``) with the density of wang2025 Fig. 3 on a threshold grid.
+
+    The grid spans ``[u_min, u_max]`` (fitted where not given: ``u_max = 0``, ``u_min`` NaN). The
+    stroke and the output offset are projected (the offset inside the creep, where the models put
+    it); ``c``, ``σ``, the range's free ends and α are moved.
+    """
     u = record.u
     lo_u, hi_u, span = float(np.min(u)), float(np.max(u)), float(np.ptp(u))
     given_hi, given_lo = u_max != 0, np.isfinite(u_min)
@@ -165,8 +159,7 @@ def _polyline_start(s, tau, knots) -> np.ndarray:
 
 
 def power_function_outputs_of(model: PowerFunctionHysteresis, s) -> np.ndarray:
-    """The exact response of :meth:`PowerFunctionHysteresis.step` along ``s`` from
-    ``initial_state(s[0])``."""
+    """The exact response of :meth:`PowerFunctionHysteresis.step` along ``s`` from ``initial_state(s[0])``."""
     from hystmpc.models.compiled import power_function_outputs
     a, d = np.asarray(model.ascending, float), np.asarray(model.descending, float)
     scale = model.torque_scale
@@ -178,8 +171,9 @@ def power_function_outputs_of(model: PowerFunctionHysteresis, s) -> np.ndarray:
 
 def power_function_problem(record: Record, knots: int = 10, ascending_s: tuple = (),
                            descending_s: tuple = ()) -> Problem:
-    """Polyline torques, transition widths and exponents moved; nothing projected (the torques
-    carry the scale and an output offset).
+    """Polyline torques, transition widths and exponents moved; nothing projected.
+
+    The torques carry the scale and an output offset.
 
     ``knots`` evenly spaced knots for both polylines, started on the input's range with the
     grid's ends fitted too, unless ``ascending_s`` / ``descending_s`` name them (then fixed).

@@ -1,5 +1,7 @@
-"""Fit problems of the families built on play operators: Prandtl–Ishlinskii, Maxwell-slip,
-Preisach and generalised Prandtl–Ishlinskii; and the naive linear model they are measured against.
+"""Fit problems of the families built on play operators, and of a naive linear model.
+
+The families are Prandtl–Ishlinskii, Maxwell-slip, Preisach and generalised
+Prandtl–Ishlinskii; the naive linear model is the one they are measured against.
 
 Each function turns a :class:`~hystmpc.models.record_fit.Record` and the family's fit options
 into a :class:`~hystmpc.models.record_fit.Problem` whose start is already a good static fit:
@@ -42,8 +44,10 @@ def _log_bounds(u, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _start_thresholds(record: Record, plays: int, column) -> np.ndarray:
-    """The thresholds a dense ladder's non-negative fit (static, no block) gives weight to:
-    at most ``plays`` of them, the heaviest."""
+    """The thresholds a dense ladder's non-negative fit (static, no block) gives weight to.
+
+    At most ``plays`` of them, the heaviest.
+    """
     from hystmpc.models.linear_dynamics import LinearDynamics
     u = record.u
     ladder = 0.5 * _span(u) * np.arange(1, LADDER_DENSITY * plays + 1) / (LADDER_DENSITY * plays + 1)
@@ -99,10 +103,13 @@ def _knots(theta_lo, theta_width, cells: int) -> np.ndarray:
 
 
 def _differences(rows: int, cols: int) -> np.ndarray:
-    """Rows of first differences along each row of a ``rows × cols`` grid (flattened row-wise),
+    """Smoothness-penalty rows for a density on a ``rows × cols`` grid.
+
+    Rows of first differences along each row of a ``rows × cols`` grid (flattened row-wise),
     and second differences down the columns of the plays' rows (row 0, the reversible part,
     stands apart): a density that changes little from cell to cell, so that cells a record
-    barely visits take their neighbours' values (a Prandtl–Ishlinskii model in the limit)."""
+    barely visits take their neighbours' values (a Prandtl–Ishlinskii model in the limit).
+    """
     out = []
     for i in range(rows):
         for j in range(cols - 1):
@@ -154,9 +161,11 @@ def preisach_problem(record: Record, plays: int = 8, cells: int = 8, smoothing: 
 
 
 def generalised_pi_problem(record: Record, plays: int = 8, cells: int = 6, start: dict | None = None) -> Problem:
-    """``y = Γ(PI[u])``: the PI part's weights (normalised to unit gain), its thresholds and Γ's
-    knots (``cells`` cells over the PI output's range) nonlinear, Γ's slopes projected (>= 0);
-    started from a PI fit (``start``, fitted here when not given)."""
+    """``y = Γ(PI[u])``, started from a PI fit (``start``, fitted here when not given).
+
+    The PI part's weights (normalised to unit gain), its thresholds and Γ's knots (``cells``
+    cells over the PI output's range) nonlinear, Γ's slopes projected (>= 0).
+    """
     if not (isinstance(cells, int) and 1 <= cells <= 50):
         raise ValueError(f"cells must be an integer in [1, 50], got {cells}")
     u = record.u

@@ -103,9 +103,11 @@ class GeneralisedPI(SteppedModel):
         return nxt, y if symbolic(y) else float(y)
 
     def smooth_step(self, eps: float, direction_eps: float | None = None) -> ca.Function:
-        """The PI part's smooth step, then Γ with its kinks smoothed over ``eps`` times the PI
-        part's gain (so ``eps`` stays in input units). The error is the PI part's times Γ's
-        largest slope, plus ``eps·gain/2`` per kink times its change of slope."""
+        """The PI part's smooth step, then Γ with its kinks smoothed over ``eps`` times the PI part's gain.
+
+        Scaling by the gain keeps ``eps`` in input units. The error is the PI part's times Γ's
+        largest slope, plus ``eps·gain/2`` per kink times its change of slope.
+        """
         check_smoothing(eps, direction_eps, has_direction=False)
         inner = self.inner.smooth_step(eps)
         width = eps * self.inner.gain

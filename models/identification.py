@@ -103,9 +103,11 @@ class FitError(RuntimeError):
 
 
 def choose_alignment(u, y, sample_period: float, warm_up: int = 0) -> str:
-    """``next`` or ``same``: whichever reads the record better, by a static Preisach fit on an
-    even grid of 12 thresholds × 12 cells (constrained least squares, no refinement), flexible
-    enough to fit every family here closely."""
+    """``next`` or ``same``: whichever reads the record better.
+
+    Judged by a static Preisach fit on an even grid of 12 thresholds × 12 cells (constrained
+    least squares, no refinement), flexible enough to fit every family here closely.
+    """
     from hystmpc.models.record_fit import evaluate
     rmse = {}
     for alignment in ALIGNMENTS:
@@ -116,9 +118,11 @@ def choose_alignment(u, y, sample_period: float, warm_up: int = 0) -> str:
 
 
 def _static_fit(fam: Family, record: Record, options: dict, other: str | None, creep: bool = False):
-    """``(problem, record, fit)`` of the static refinement (with a creep if ``creep``); with
-    ``other``, the other row alignment gets a short refinement from the fit and replaces it if
-    it does better."""
+    """``(problem, record, fit)`` of the static refinement (with a creep if ``creep``).
+
+    With ``other``, the other row alignment gets a short refinement from the fit and replaces it
+    if it does better.
+    """
     from dataclasses import replace
 
     from hystmpc.models.record_fit import refine, with_creep
@@ -141,8 +145,11 @@ def _static_fit(fam: Family, record: Record, options: dict, other: str | None, c
 
 
 def _joint(problem, record: Record, fit, kind: str, delays, fast: Record | None, name: str):
-    """From the static ``fit``: the block's fit and the joint refinement; returns the fit and
-    the dynamics' own RMSE on the record they were fitted on (None without a block)."""
+    """From the static ``fit``: the block's fit and the joint refinement.
+
+    Returns the fit and the dynamics' own RMSE on the record they were fitted on (None without a
+    block).
+    """
     from dataclasses import replace
 
     from hystmpc.models.record_fit import evaluate, fit_block, refine
@@ -169,8 +176,11 @@ def _joint(problem, record: Record, fit, kind: str, delays, fast: Record | None,
 
 
 def shows_resonance(u, y, sample_period: float, alignment: str, delays, warm_up: int = 0) -> tuple[bool, str]:
-    """Whether a record shows a second-order block's resonance: the second-order fit must beat
-    the first-order one by 2 % in RMSE (on a Prandtl–Ishlinskii start); ``(shows, why)``."""
+    """Whether a record shows a second-order block's resonance: ``(shows, why)``.
+
+    The second-order fit must beat the first-order one by 2 % in RMSE (on a Prandtl–Ishlinskii
+    start).
+    """
     from hystmpc.models.record_fit import fit_block, refine
     record = Record(np.asarray(u, float), np.asarray(y, float), sample_period, alignment, warm_up)
     problem = prandtl_ishlinskii_problem(record, 10)
@@ -185,8 +195,11 @@ def shows_resonance(u, y, sample_period: float, alignment: str, delays, warm_up:
 
 def require_resonance(u, y, sample_period: float, alignment: str, delays, warm_up: int = 0,
                       fast: tuple | None = None) -> None:
-    """``ValueError`` unless the record (or ``fast``, the dynamics record) shows a second-order
-    block's resonance (:func:`shows_resonance`)."""
+    """``ValueError`` unless the record shows a second-order block's resonance.
+
+    The record checked is ``fast``, the dynamics record, when given; the test is
+    :func:`shows_resonance`.
+    """
     shows, why = shows_resonance(*(fast or (u, y)), sample_period, alignment, delays, 0 if fast else warm_up)
     if not shows:
         raise ValueError(f"the {'dynamics ' if fast else ''}record is too slow to show a resonance: {why}; fit "

@@ -73,8 +73,11 @@ class Ranking:
 
 
 def validation_prediction(identified, fit_u, u_val, continue_state: bool, warm_up: int) -> np.ndarray:
-    """The model's output on the validation inputs: from rest at their first input (the first
-    ``warm_up`` samples left out), or continuing the fit record's state."""
+    """The model's output on the validation inputs.
+
+    From rest at their first input (the first ``warm_up`` samples left out), or continuing the
+    fit record's state.
+    """
     u_val = np.asarray(u_val, float)
     if continue_state:
         return identified.predict(np.concatenate((fit_u, u_val)))[len(fit_u):]
@@ -108,8 +111,10 @@ class NaiveModel:
 
 def naive_model(u, y, sample_period: float, alignment: str = "next", max_delay: int = 20, warm_up: int = 0
                 ) -> NaiveModel:
-    """The :class:`NaiveModel` fitted to the record (gain of either sign, lag, dead time up to
-    ``max_delay``, offset), by the same least squares as the families."""
+    """The :class:`NaiveModel` fitted to the record, by the same least squares as the families.
+
+    Its parameters: a gain of either sign, a lag, a dead time up to ``max_delay`` and an offset.
+    """
     from hystmpc.models.fit_plays import linear_problem
     record = Record(np.asarray(u, float), np.asarray(y, float), sample_period, alignment, warm_up)
     block, _ = fit_block(record.u, record, "first-order", range(max_delay + 1))
@@ -118,8 +123,11 @@ def naive_model(u, y, sample_period: float, alignment: str = "next", max_delay: 
 
 
 def _one_blas_thread() -> None:
-    """BLAS on one thread in a worker: the matrices are small, and threads of two workers on
-    two cores wait for each other (three times slower here)."""
+    """BLAS on one thread in a worker.
+
+    The matrices are small, and threads of two workers on two cores wait for each other (three
+    times slower here).
+    """
     from threadpoolctl import threadpool_limits
     threadpool_limits(1, user_api="blas")
 

@@ -104,8 +104,10 @@ class KrasnoselskiiPokrovskii(SteppedModel):
         return float(self.weights.sum())
 
     def initial_state(self, u0: float) -> np.ndarray:
-        """State after a monotone rise to ``u0`` from below every threshold (all kernels
-        at −1 when ``u0`` is below every ρ2)."""
+        """State after a monotone rise to ``u0`` from below every threshold.
+
+        All kernels are at −1 when ``u0`` is below every ρ2.
+        """
         u0 = float(u0)
         return np.concatenate(([u0], ridge(u0 - self.rho2, self.delta)))
 
@@ -124,8 +126,10 @@ class KrasnoselskiiPokrovskii(SteppedModel):
         return xi.copy()
 
     def step(self, state, u: float, weights=None) -> tuple[np.ndarray, float]:
-        """Exact step to input ``u``; returns ``(state, κ)``. ``weights`` replaces the density
-        (for adaptive estimates of it)."""
+        """Exact step to input ``u``; returns ``(state, κ)``.
+
+        ``weights`` replaces the density (for adaptive estimates of it).
+        """
         if symbolic(state) or symbolic(u):
             if weights is not None:
                 raise ValueError("weights applies to NumPy states only")
@@ -211,8 +215,9 @@ class KrasnoselskiiPokrovskii(SteppedModel):
 
     def bisection_inverse(self, state, y_target, u_min: float = -1.0, u_max: float = 1.0,
                           iterations: int = 44):
-        """An input that reaches ``y_target`` from ``state`` by bisection, and the state after
-        it: ``(state, u)``, on CasADi expressions (the same arithmetic as the generated C).
+        """An input that reaches ``y_target`` from ``state`` by bisection, and the state after it.
+
+        Returns ``(state, u)``, on CasADi expressions (the same arithmetic as the generated C).
 
         The output moves monotonically with the input in the direction of the target, so
         ``iterations`` halvings of ``[u_last, bound]`` (width at most 2) find the input where the

@@ -59,11 +59,13 @@ class LinearDynamics:
         return np.array([[0.0, 1.0], [-wn**2, -2 * zeta * wn]]), np.array([0.0, wn**2])
 
     def discrete(self, sample_period: float, hold: bool = False) -> Dynamics | None:
-        """The block as discrete :class:`Dynamics`, exact for ``h`` held over each sample
-        (zero-order hold, which is what an input-driven hysteresis gives).
+        """The block as discrete :class:`Dynamics`, exact for ``h`` held over each sample.
+
+        That is a zero-order hold, which is what an input-driven hysteresis gives.
 
         For ``none``: None, or with ``hold`` one state that holds ``h`` until the next sample
-        (the same output; a creep model needs its output to be a state)."""
+        (the same output; a creep model needs its output to be a state).
+        """
         if self.kind == "none":
             if not hold:
                 return None
@@ -96,11 +98,13 @@ class LinearDynamics:
         return None
 
     def virtual_input_model(self, sample_period: float) -> PredictionModel:
-        """The block driven by a virtual input ``v`` (the hysteresis output it asks for) plus an
-        input disturbance ``d``, after the dead time (a queue of ``v``): what is left between
-        an inverse hysteresis compensation and the output, for a linear MPC. States: the
-        block's (``output`` for ``none``: the output follows ``h`` one sample later) and
-        ``delay_1..delay_D``; sensor: the output."""
+        """The block driven by a virtual input ``v`` plus an input disturbance ``d``, after the dead time.
+
+        ``v`` is the hysteresis output asked for; the dead time is a queue of ``v``. This is what is
+        left between an inverse hysteresis compensation and the output, for a linear MPC. States:
+        the block's (``output`` for ``none``: the output follows ``h`` one sample later) and
+        ``delay_1..delay_D``; sensor: the output.
+        """
         import casadi as ca
 
         block = self.discrete(sample_period, hold=True)
@@ -122,10 +126,12 @@ class LinearDynamics:
                  "second-order": 2 * self.damping / (2 * np.pi * self.natural_frequency_hz)}[self.kind]
 
     def response(self, h, sample_period: float, from_steady_state: bool = False) -> np.ndarray:
-        """Output measured at each sample for the hysteresis output ``h_k`` held from that
-        sample on (zero-order hold; so ``y_k`` depends on ``h_{k-1}`` and earlier), after the
-        dead time: from rest at zero, or with ``from_steady_state`` at rest at ``h_0`` (a
-        record that starts with the actuator settled). ``h`` may hold one signal per column."""
+        """Output measured at each sample for the hysteresis output ``h_k`` held from that sample on.
+
+        The hold is a zero-order hold, so ``y_k`` depends on ``h_{k-1}`` and earlier. The output
+        comes after the dead time, from rest at zero, or with ``from_steady_state`` at rest at ``h_0``
+        (a record that starts with the actuator settled). ``h`` may hold one signal per column.
+        """
         from scipy.signal import lfilter
 
         h = np.asarray(h, float)
@@ -143,9 +149,11 @@ class LinearDynamics:
         return out if start is None else out + start
 
     def zoh_filter(self, sample_period: float) -> tuple[np.ndarray, np.ndarray]:
-        """``(b, a)`` of the block under a zero-order hold, in closed form (a first-order lag's
-        pole ``e^{−T/τ}``; a second-order block's partial fractions over its two poles, exact
-        to about ``1e-16 / |ζ − 1|`` relative, a double pole's own form at ``ζ = 1``)."""
+        """``(b, a)`` of the block under a zero-order hold, in closed form.
+
+        A first-order lag's pole ``e^{−T/τ}``; a second-order block's partial fractions over its two
+        poles, exact to about ``1e-16 / |ζ − 1|`` relative, a double pole's own form at ``ζ = 1``.
+        """
         if self.kind == "first-order":
             pole = np.exp(-sample_period / self.time_constant)
             return np.array([0.0, 1.0 - pole]), np.array([1.0, -pole])

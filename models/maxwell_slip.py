@@ -72,8 +72,9 @@ class MaxwellSlip(SteppedModel):
         return float(np.sum(np.asarray(state)[1:]))
 
     def step(self, state, u: float) -> tuple[np.ndarray, float]:
-        """Exact step: move the input to ``u``; return the new state and the output (NumPy,
-        or CasADi expressions when ``state`` or ``u`` is one).
+        """Exact step: move the input to ``u``; return the new state and the output.
+
+        NumPy, or CasADi expressions when ``state`` or ``u`` is one.
 
         Parameters
         ----------

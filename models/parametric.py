@@ -85,8 +85,10 @@ class ParametricHysteresis(SteppedModel):
         return u - u0 + v0 + s * m * (1 - lib.exp(-self.p2 * du))
 
     def step(self, state, u: float) -> tuple[np.ndarray, float]:
-        """Exact step of H to input ``u``; returns ``(state, v)`` (CasADi expressions when
-        ``state`` or ``u`` is one)."""
+        """Exact step of H to input ``u``; returns ``(state, v)``.
+
+        Both are CasADi expressions when ``state`` or ``u`` is one.
+        """
         s, u0, v0 = self._update_memory(state, u)
         if symbolic(s):
             v = self.direct(u if symbolic(u) else type(s)(u), s, u0, v0)

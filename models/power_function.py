@@ -155,8 +155,10 @@ class PowerFunctionHysteresis(SteppedModel):
     reversal, torque."""
 
     def initial_state(self, s0: float | None = None) -> np.ndarray:
-        """Resting on the ascending polyline at ``s0`` (default: where τ_al = 0); a CasADi
-        ``s0`` gives the state as an expression."""
+        """Resting on the ascending polyline at ``s0`` (default: where τ_al = 0).
+
+        A CasADi ``s0`` gives the state as an expression.
+        """
         if symbolic(s0):
             tau = self.tau_ascending(s0)
             return ca.vertcat(s0, 1.0, s0, s0 - self.delta_s1(s0), tau, tau)
@@ -232,8 +234,10 @@ class PowerFunctionHysteresis(SteppedModel):
         return ca.if_else(unmoved, state, moved), s
 
     def step(self, state, s: float) -> tuple[np.ndarray, float]:
-        """Exact step to virtual deformation ``s``; returns ``(state, τ)`` (CasADi expressions
-        when ``state`` or ``s`` is one)."""
+        """Exact step to virtual deformation ``s``; returns ``(state, τ)``.
+
+        Both are CasADi expressions when ``state`` or ``s`` is one.
+        """
         if symbolic(state) or symbolic(s):
             return self._step_expr(state, s)
         s_last, up, s01, s02, tau_r, tau_last = (float(v) for v in state)
@@ -366,8 +370,10 @@ class VirtualDeformation:
                              + 2 * self.pretension * r * xp.sin(theta) / k)
 
     def theta(self, s) -> np.ndarray:
-        """Inverse of :meth:`s` on |θ1| < π/2 (s is odd and increasing there), by Newton steps
-        (for a CasADi ``s``: the same steps as an expression, through :meth:`theta_function`)."""
+        """Inverse of :meth:`s` on |θ1| < π/2 (s is odd and increasing there), by Newton steps.
+
+        For a CasADi ``s``: the same steps as an expression, through :meth:`theta_function`.
+        """
         if symbolic(s):
             theta = self.theta_function()  # one Function, called per element: small C
             return ca.vertcat(*[theta(s[i]) for i in range(s.numel())])
@@ -385,8 +391,11 @@ class VirtualDeformation:
         return theta
 
     def theta_function(self) -> ca.Function:
-        """``theta(s)`` for a scalar as a CasADi Function: the 50 Newton steps of :meth:`theta`
-        unrolled, each applied only until one is below 1e-15 (as the loop's ``break``)."""
+        """``theta(s)`` for a scalar as a CasADi Function.
+
+        The 50 Newton steps of :meth:`theta` unrolled, each applied only until one is below 1e-15
+        (as the loop's ``break``).
+        """
         s = ca.SX.sym("s")
         r, k = self.pinion_radius, self.stiffness
         theta = clip(s / (self.scale * 2 * self.pretension * r / k), -1.2, 1.2)

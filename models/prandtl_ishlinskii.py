@@ -79,8 +79,7 @@ class PrandtlIshlinskii(SteppedModel):
         return float(self.gain * state[0] - np.sum(state[1:]))
 
     def step(self, state, u: float) -> tuple[np.ndarray, float]:
-        """Exact step to input ``u``; returns ``(state, y)`` (CasADi expressions when ``state``
-        or ``u`` is one)."""
+        """Exact step to input ``u``; returns ``(state, y)`` (CasADi expressions when ``state`` or ``u`` is one)."""
         if symbolic(state) or symbolic(u):
             if not self.weights:
                 return ca.vertcat(u), self.linear_gain * u
@@ -108,9 +107,11 @@ class PrandtlIshlinskii(SteppedModel):
         return smooth_function("prandtl_ishlinskii_smooth", 1 + n, expressions)
 
     def inverse_step(self, state, y_target: float) -> tuple[np.ndarray, float]:
-        """The input that brings the output to ``y_target`` from ``state`` (exact: the output
-        is piecewise linear and monotone along a monotone input path), and the new state.
-        On CasADi expressions (a generated controller) :meth:`symbolic_inverse_step`."""
+        """The input that brings the output to ``y_target`` from ``state``, and the new state.
+
+        Exact: the output is piecewise linear and monotone along a monotone input path. On CasADi
+        expressions (a generated controller) :meth:`symbolic_inverse_step`.
+        """
         if symbolic(state) or symbolic(y_target):
             return self.symbolic_inverse_step(state, y_target)
         if not np.isfinite(y_target):

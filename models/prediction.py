@@ -17,7 +17,7 @@ enters is a choice (``disturbance``): added to the output, to the hysteresis out
 left to ``rhs``. With creep (a Grünwald–Letnikov fractional integral between the
 hysteresis and the dynamics), the prediction is not a Markov step: the builder then
 returns a :class:`CreepPredictionModel`, whose horizon prediction takes the creep history
-as parameters (design/nmpc.md).
+as parameters (docs/dea.md, "Model").
 
 The result carries what a controller needs to know beyond the step: sensor names and,
 for input-driven models, :class:`InputMemory`, the parts of the state that follow exactly
@@ -242,8 +242,11 @@ def _rhs(dynamics: Dynamics, x, u, h, d) -> ca.SX:
 
 
 def check_sampling(sample_period: float, delay_samples: int, substeps: int) -> None:
-    """``ValueError`` unless the sample period is finite and > 0, the dead time an integer >= 0
-    and the RK4 substeps an integer >= 1."""
+    """``ValueError`` unless the sample period, the dead time and the RK4 substeps are valid.
+
+    The sample period must be finite and > 0, the dead time an integer >= 0 and the RK4 substeps
+    an integer >= 1.
+    """
     if not (np.isfinite(sample_period) and sample_period > 0):
         raise ValueError(f"sample_period must be finite and > 0, got {sample_period}")
     for name, value, least in (("delay_samples", delay_samples, 0), ("substeps", substeps, 1)):
@@ -418,7 +421,7 @@ class CreepPredictionModel:
     The creep output of predicted sample ``i`` is ``h^α Σ_{j<=i} c_j w_{k+i−j} + hist_i``
     over the predicted hysteresis outputs ``w`` plus ``hist_i``, the part the stored past
     fixes (:meth:`hystmpc.models.fractional.GrunwaldLetnikov.history_terms`), so the NLP
-    stays small however long the memory (design/nmpc.md). Built by
+    stays small however long the memory (docs/dea.md, "Model"). Built by
     :func:`build_prediction_model` with ``creep_order > 0``.
     """
 

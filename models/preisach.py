@@ -41,8 +41,10 @@ from hystmpc.models.smooth import smooth_clip, smooth_max, smooth_min
 
 
 def cell_ramps(z, knots, reversible: bool) -> np.ndarray:
-    """``clip(z − s_j, 0, s_{j+1} − s_j)`` for every cell of ``knots`` (a new last axis); with
-    ``reversible`` the end cells continue beyond the grid (the reversible part's shape)."""
+    """``clip(z − s_j, 0, s_{j+1} − s_j)`` for every cell of ``knots`` (a new last axis).
+
+    With ``reversible`` the end cells continue beyond the grid (the reversible part's shape).
+    """
     s = np.asarray(knots, float)
     width = np.diff(s)
     z = np.asarray(z, float)[..., None]
@@ -153,8 +155,9 @@ class Preisach(SteppedModel):
         return nxt, self.output(nxt)
 
     def smooth_step(self, eps: float, direction_eps: float | None = None) -> ca.Function:
-        """Smooth step ``(state, u) -> (state_next, y)``: each play's clip and each kink of the
-        shape functions smoothed over ``eps``.
+        """Smooth step ``(state, u) -> (state_next, y)``.
+
+        Each play's clip and each kink of the shape functions are smoothed over ``eps``.
 
         A smoothed play errs by at most ``eps/2`` (1-Lipschitz), so after ``n`` steps a play is
         within ``n·eps/2``; each kink adds at most ``eps/2`` times its slope. The output error is
@@ -172,8 +175,11 @@ class Preisach(SteppedModel):
 
     # ----- inverse ------------------------------------------------------------------------------------
     def linear_beyond(self) -> tuple[tuple[float, float], float]:
-        """``(edges, reach)``: once a move has gone ``reach`` and past ``edges``, every play follows
-        the input beyond the knots, and only the reversible part's end slope is left."""
+        """``(edges, reach)`` for the bisection.
+
+        Once a move has gone ``reach`` and past ``edges``, every play follows the input beyond the
+        knots, and only the reversible part's end slope is left.
+        """
         r_max = max(self.thresholds, default=0.0)
         return (self.knots[0] - r_max, self.knots[-1] + r_max), 2.0 * r_max
 
@@ -182,10 +188,12 @@ class Preisach(SteppedModel):
         return self.density[0][0], self.density[0][-1]
 
     def inverse_step(self, state, y_target: float) -> tuple[np.ndarray, float]:
-        """The input that brings the output to ``y_target`` from ``state`` along a monotone move,
-        and the state after it (exact: the output is piecewise linear and monotone along the
-        move). A target beyond the model's reach gives the input where the output stops
-        changing. On CasADi expressions: bisection (:func:`hystmpc.models.base.bisection_inverse`)."""
+        """The input that brings the output to ``y_target`` from ``state``, and the state after it.
+
+        Found along a monotone move (exact: the output is piecewise linear and monotone along the
+        move). A target beyond the model's reach gives the input where the output stops changing.
+        On CasADi expressions: bisection (:func:`hystmpc.models.base.bisection_inverse`).
+        """
         if symbolic(state) or symbolic(y_target):
             return bisection_inverse(self, state, y_target, *self.linear_beyond(), self.tail_slopes())
         if not np.isfinite(y_target):

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hystmpc.models.fractional import creep_integral
 from hystmpc.models.linear_dynamics import LinearDynamics
 
 ALIGNMENTS = ("next", "same")
@@ -71,8 +72,11 @@ def block_theta(block: LinearDynamics) -> np.ndarray:
 
 
 def block_bounds(kind: str, sample_period: float) -> tuple[list[float], list[float]]:
-    """Search bounds of :func:`block_theta` (a lag between a tenth of a sample and 1e4 s; a
-    resonance below Nyquist with a damping from 0.007 to 7)."""
+    """Search bounds of :func:`block_theta`.
+
+    A lag between a tenth of a sample and 1e4 s; a resonance below Nyquist with a damping from
+    0.007 to 7.
+    """
     if kind == "first-order":
         return [np.log(sample_period / 10)], [np.log(1e4)]
     if kind == "second-order":
@@ -91,9 +95,11 @@ def block_of(kind: str, theta, delay: int) -> LinearDynamics:
 
 
 def respond(columns: np.ndarray, block: LinearDynamics, record: Record) -> np.ndarray:
-    """What the sensor reads, row by row, for hysteresis outputs ``columns`` (one signal per
-    column): the block from its steady state at each column's first value, the dead time,
-    then the record's row alignment."""
+    """What the sensor reads, row by row, for hysteresis outputs ``columns`` (one signal per column).
+
+    The outputs go through the block (from its steady state at each column's first value), the
+    dead time, then the record's row alignment.
+    """
     columns = np.asarray(columns, float)
     flat = columns.ndim == 1
     h = columns[:, None] if flat else columns
@@ -109,15 +115,20 @@ def respond(columns: np.ndarray, block: LinearDynamics, record: Record) -> np.nd
 
 def project(F: np.ndarray, y: np.ndarray, nonneg: np.ndarray, penalty: np.ndarray | None = None,
             intercept: bool = True) -> tuple[np.ndarray, float]:
-    """Weights ``w`` (non-negative where ``nonneg``) and offset ``c`` minimising
-    ``|y − F w − c|² + |penalty w|²`` (``c = 0`` without ``intercept``)."""
+    """Weights ``w`` and offset ``c`` minimising ``|y − F w − c|² + |penalty w|²``.
+
+    ``w`` is non-negative where ``nonneg``; ``c = 0`` without ``intercept``.
+    """
     return project_normal(F.T @ F, F.T @ y, F.sum(axis=0), float(np.sum(y)), len(y), nonneg, penalty, intercept)
 
 
 def project_normal(FtF, Fty, sum_f, sum_y: float, n: int, nonneg: np.ndarray, penalty: np.ndarray | None = None,
                    intercept: bool = True) -> tuple[np.ndarray, float]:
-    """:func:`project` from the normal equations' pieces ``FᵀF``, ``Fᵀy``, ``Σ_rows F``, ``Σ y``
-    and the number of rows ``n`` (which the refinement keeps per group of columns)."""
+    """:func:`project` from the normal equations' pieces.
+
+    The pieces are ``FᵀF``, ``Fᵀy``, ``Σ_rows F``, ``Σ y`` and the number of rows ``n`` (which
+    the refinement keeps per group of columns).
+    """
     from scipy.linalg import cho_factor, cho_solve, solve_triangular
     from scipy.optimize import nnls
 
@@ -208,8 +219,11 @@ class Problem:
         return respond(self.columns(theta), block, record)
 
     def _normal_equations(self, parts, y: np.ndarray):
-        """``(F, FᵀF, Fᵀy, Σ F)`` for the groups ``parts``, updating the last call's in the
-        columns of the groups that changed (a finite-difference step changes one or two)."""
+        """``(F, FᵀF, Fᵀy, Σ F)`` for the groups ``parts``.
+
+        Updates the last call's in the columns of the groups that changed (a finite-difference step
+        changes one or two).
+        """
         keys = [key for key, _ in parts]
         widths = [block.shape[1] for _, block in parts]
         last = self._last
@@ -252,10 +266,11 @@ class Problem:
 
 
 def with_creep(problem: Problem, record: Record) -> Problem:
-    """``problem`` with a Grünwald–Letnikov creep ``D^(−α)`` after its hysteresis output: every
-    group through the creep, α a new last entry of ``theta`` (in [0, 0.5)), and the output offset
-    a column of ones through the creep (where a model with creep carries it)."""
-    from hystmpc.models.fit_operators import creep_integral
+    """``problem`` with a Grünwald–Letnikov creep ``D^(−α)`` after its hysteresis output.
+
+    Every group goes through the creep, α is a new last entry of ``theta`` (in [0, 0.5)), and the
+    output offset is a column of ones through the creep (where a model with creep carries it).
+    """
     if problem.fixed_weights is not None or not problem.intercept:
         raise ValueError("this family takes no creep of this kind (its scale or offset is its own parameter)")
     a, n, period = len(problem.theta), len(record.u), record.sample_period
@@ -297,10 +312,12 @@ def evaluate(problem: Problem, theta, block: LinearDynamics, record: Record) -> 
 
 def refine(problem: Problem, record: Record, block: LinearDynamics, move_block: bool = True,
            iterations: int | None = None, hold: tuple[int, ...] = ()) -> Fit:
-    """Move ``theta`` (and the block's parameters if ``move_block``) to the least simulation
-    error, the weights and offset projected at each step, for at most ``iterations`` (default:
-    the problem's) Gauss–Newton steps, each one finite-difference Jacobian; the dead time stays. Entries
-    whose bounds coincide, and those in ``hold``, stay where they are."""
+    """Move ``theta`` (and the block's parameters if ``move_block``) to the least simulation error.
+
+    The weights and offset are projected at each step, for at most ``iterations`` (default: the
+    problem's) Gauss–Newton steps, each one finite-difference Jacobian; the dead time stays.
+    Entries whose bounds coincide, and those in ``hold``, stay where they are.
+    """
     from scipy.optimize import least_squares
 
     kind, delay = block.kind, block.delay_samples
@@ -346,8 +363,11 @@ def refine(problem: Problem, record: Record, block: LinearDynamics, move_block: 
 # ----- the dynamics -----------------------------------------------------------------------------------
 
 def _grid(kind: str, record: Record) -> list[np.ndarray]:
-    """Block parameters (:func:`block_theta`) the dead-time search tries: lags from a tenth of a
-    sample to a tenth of the record, resonances from 10 cycles per record to Nyquist."""
+    """Block parameters (:func:`block_theta`) the dead-time search tries.
+
+    Lags from a tenth of a sample to a tenth of the record, resonances from 10 cycles per record
+    to Nyquist.
+    """
     T, duration = record.sample_period, record.sample_period * len(record.u)
     if kind == "first-order":
         return [np.log([tau]) for tau in np.geomspace(0.1 * T, max(0.1 * duration, T), 24)]
@@ -358,11 +378,14 @@ def _grid(kind: str, record: Record) -> list[np.ndarray]:
 
 
 def fit_block(h: np.ndarray, record: Record, kind: str, delays: Sequence[int]) -> tuple[LinearDynamics, float]:
-    """The block ``kind`` and dead time (from ``delays``) that best map one hysteresis output
-    ``h`` (gain and offset projected) onto the record: ``(block, rmse)``.
+    """The block ``kind`` and dead time that best map one hysteresis output ``h`` onto the record.
+
+    The dead time is taken from ``delays``, and the gain and offset are projected; returns
+    ``(block, rmse)``.
 
     A grid search (each dead time with every grid block; for a second-order block, the dead
-    times within 2 samples of the best lag's), then a least-squares polish of the best."""
+    times within 2 samples of the best lag's), then a least-squares polish of the best.
+    """
     rows = record.rows()
     y = record.y[rows]
 

@@ -90,11 +90,12 @@ class ReluctanceModel:
         return x_pts[keep], f_pts[keep]
 
     def smooth_force_of_x(self, gap: float, kink_eps: float = 1e-4):
-        """Lut⁻¹(X, g) as the polyline of :meth:`force_table` with its kinks rounded over
-        ``kink_eps`` (for CasADi); ``kink_eps = 0``: the polyline itself, a binary-search
-        look-up (CasADi's linear interpolant, extended linearly beyond the table), what
-        :func:`prediction_model` uses by default; the rounded default suits interior-point
-        NLPs (:func:`offline_optimum`)."""
+        """Lut⁻¹(X, g) as the polyline of :meth:`force_table` with its kinks rounded over ``kink_eps``.
+
+        Meant for CasADi. ``kink_eps = 0``: the polyline itself, a binary-search look-up (CasADi's
+        linear interpolant, extended linearly beyond the table), what :func:`prediction_model` uses
+        by default; the rounded default suits interior-point NLPs (:func:`offline_optimum`).
+        """
         if not (np.isfinite(kink_eps) and kink_eps >= 0):
             raise ValueError(f"kink_eps must be finite and >= 0 (0: the exact polyline), got {kink_eps}")
         xs, fs = self.force_table(gap)
@@ -145,8 +146,10 @@ def fit_reluctance_model(loops: dict[float, tuple[np.ndarray, np.ndarray]], wind
 
 def prediction_model(model: ReluctanceModel, gap: float, sample_period: float, eps: float,
                      direction_eps: float | None = None, kink_eps: float = 0.0) -> PredictionModel:
-    """F = Lut⁻¹(H[i], g), eq. (12b), with the smooth H and the table as a polyline (its
-    kinks rounded over ``kink_eps``, see :meth:`ReluctanceModel.smooth_force_of_x`).
+    """F = Lut⁻¹(H[i], g), eq. (12b), with the smooth H and the table as a polyline.
+
+    The polyline's kinks are rounded over ``kink_eps`` (see
+    :meth:`ReluctanceModel.smooth_force_of_x`).
 
     Force is not measured in operation: no sensors, no disturbance; the state is H's. The
     static inverse is the table, Lut(F, g) (for warm starts: IH[Lut(F, g)], eq. (12a)).

@@ -27,9 +27,11 @@ Inverse = Callable[[Estimate, np.ndarray], np.ndarray]
 
 def default_observer(model: PredictionModel | CreepPredictionModel, sensor_noise=None,
                      creep_window: int | None = None):
-    """The observer a model gets when none is given: exact memory + an EKF on the dynamics for
-    an input-driven model, an EKF on every state otherwise; EKFs tuned from ``sensor_noise``
-    (:meth:`DisturbanceEKF.from_sensor_noise`)."""
+    """The observer a model gets when none is given.
+
+    Exact memory + an EKF on the dynamics for an input-driven model, an EKF on every state
+    otherwise; EKFs tuned from ``sensor_noise`` (:meth:`DisturbanceEKF.from_sensor_noise`).
+    """
     memory = model.memory
     if memory is not None and not (memory.n_dynamic or model.sensor_names):
         return MemoryObserver(model, creep_window=creep_window)  # feed-forward: the inputs fix the state

@@ -29,17 +29,13 @@ import casadi as ca
 import numpy as np
 
 from hystmpc.models.fractional import window_functions
+from hystmpc.mpc.codegen.controller import ControllerCode
 from hystmpc.mpc.observer import Estimate, MemoryObserver, StateObserver
 from hystmpc.mpc.rti import QP_TOLERANCE
 
 
 class NotGeneratable(ValueError):
     """The controller has a part without a CasADi form yet (the message says which)."""
-
-
-STATUS_CODES = {0: "solved", 1: "solver failed: fallback input sent",
-                2: "estimate not finite: restarted from the sensors, fallback input sent"}
-"""The ``status`` output of ``feedback`` (and of the generated ``<name>_step``)."""
 
 
 @dataclass(frozen=True)
@@ -96,8 +92,11 @@ class MemoryLayout:
 
 
 def _rows(v, start: int, stop: int) -> ca.MX:
-    """``v[start:stop]`` as a column, also for a 1x1 ``v`` and an empty range (where CasADi's
-    slicing gives a 1x0 row that will not stack)."""
+    """``v[start:stop]`` as a column.
+
+    Also for a 1x1 ``v`` and an empty range (where CasADi's slicing gives a 1x0 row that will
+    not stack).
+    """
     return ca.vertcat(*[v[i] for i in range(start, stop)]) if stop > start else ca.MX(0, 1)
 
 
@@ -165,9 +164,12 @@ class _StateEstimator:
 
 
 class _MemoryEstimator:
-    """A :class:`MemoryObserver` as expressions: the exact hysteresis and dead time on the
-    inputs sent, and the EKF (on the dynamics, or on the whole model with the exact states
-    held) if there is one; the creep memory as the last ``window + 1`` hysteresis outputs."""
+    """A :class:`MemoryObserver` as expressions.
+
+    The exact hysteresis and dead time on the inputs sent, and the EKF (on the dynamics, or on
+    the whole model with the exact states held) if there is one; the creep memory as the last
+    ``window + 1`` hysteresis outputs.
+    """
 
     def __init__(self, controller):
         obs, model = controller.observer, controller.model
@@ -378,12 +380,66 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     return feedback, prepare, layout
 
 
+def controller_code(controller, name: str) -> ControllerCode:
+    """What :func:`hystmpc.mpc.codegen.write_controller` writes for ``controller``.
+
+    Its Functions (:func:`controller_functions`, prefixed ``name``) and the facts its C header
+    states.
+
+    Raises :class:`NotGeneratable` when the controller cannot be generated.
+    """
+    feedback, prepare, layout = controller_functions(controller, name)
+    sl, rti = layout.slices, controller.solvers.rti
+    bounds = controller.bounds
+    return ControllerCode(
+        feedback=feedback, prepare=prepare, initial_memory=tuple(float(v) for v in layout.initial()),
+        offsets={key: sl[key].start for key in ("failures", "u_last", "estimator_resets")},
+        horizon=controller.horizon, sensor_names=tuple(controller.sensor_names),
+        bounds=(float(bounds.lower), float(bounds.upper), float(bounds.rate)), iterations=rti.iterations,
+        extra_step_tolerance=rti.extra_step_tolerance, warm_start=controller.settings.warm_start, qp=rti.qp,
+        sensitivity_block=rti.sensitivity_block, estimator_docs=_estimator_docs(controller),
+        qp_dimensions=_daqp_dimensions(controller))
+
+
+def _estimator_docs(controller) -> dict[str, str]:
+    """What ``_step``, ``_prepare`` and ``_init`` do with the estimate, in the header's words."""
+    observer = controller.observer
+    if isinstance(observer, MemoryObserver):
+        memory = "the exact hysteresis memory" + (" and dead time" if observer.memory.delay_samples else "")
+        if observer.creeping:
+            memory += f" and the creep memory (the last {observer.creep_window + 1} hysteresis outputs)"
+        if observer.ekf is None:
+            return {"feedback_doc": f"no estimation (the actuator has no sensors: {memory} follows the inputs sent)",
+                    "prepare_doc": f"moves {memory} with the input just sent",
+                    "init_doc": f"{memory} at rest"}
+        on = "the dynamics" if observer.split else "the whole model, the exact states held"
+        return {"feedback_doc": f"the EKF's measurement update on {on} (restarting from the sensors when the "
+                                "estimate is not finite)",
+                "prepare_doc": f"moves {memory} with the input just sent, and the EKF's time update",
+                "init_doc": f"{memory} at rest, no estimate yet (the first step starts it from the sensors)"}
+    return {"feedback_doc": "the EKF's measurement update (restarting from the sensors when the estimate is "
+                            "not finite)",
+            "prepare_doc": "the EKF's time update with the input just sent",
+            "init_doc": "no estimate yet (the first step starts it from the sensors)"}
+
+
+def _daqp_dimensions(controller) -> tuple[int, int, int] | None:
+    """``(n, m, ms)`` of the DAQP QP in the controller's RTI step (None: it calls no DAQP)."""
+    for fun in controller.problem.rti.find_functions():
+        if fun.class_name() == "DaqpInterface":
+            n, na = fun.sparsity_in("h").size1(), fun.sparsity_in("a").size1()
+            return n, n + na, n
+    return None
+
+
 def rti_steps_expr(rti: ca.Function, w, p, iterations: int, extra_step_tolerance: float = np.inf,
                    extra_step: ca.Function | None = None):
-    """:func:`hystmpc.mpc.rti.rti_steps` as expressions: ``(w, worst, broken)``, the last
-    finite iterate, the worst ``qp_error`` (a NaN stays) and whether a step was not finite.
-    A non-finite step keeps the iterate before it, so that the next QP gets finite data.
-    ``extra_step``: :func:`_extra_rti_step` of ``rti``, made once per generated controller."""
+    """:func:`hystmpc.mpc.rti.rti_steps` as expressions: ``(w, worst, broken)``.
+
+    The last finite iterate, the worst ``qp_error`` (a NaN stays) and whether a step was not
+    finite. A non-finite step keeps the iterate before it, so that the next QP gets finite data.
+    ``extra_step``: :func:`_extra_rti_step` of ``rti``, made once per generated controller.
+    """
     worst, broken, moved = ca.MX(0), ca.MX(0), ca.MX(0)
 
     def take(w, step, taken=None):
@@ -409,17 +465,22 @@ def rti_steps_expr(rti: ca.Function, w, p, iterations: int, extra_step_tolerance
 
 
 def _extra_rti_step(rti: ca.Function, N: int, n_p: int) -> ca.Function:
-    """``step(needed, w, p)``: ``rti(w, p)`` where ``needed``, else ``(w, 0)``, through a switch,
-    so that generated code takes the step only on the samples that need it."""
+    """``step(needed, w, p)``: ``rti(w, p)`` where ``needed``, else ``(w, 0)``, through a switch.
+
+    The switch lets generated code take the step only on the samples that need it.
+    """
     w, p = ca.MX.sym("w", N), ca.MX.sym("p", n_p)
     skip = ca.Function("no_extra_rti_step", [w, p], [w, ca.MX(0)])
     return ca.Function.if_else("extra_rti_step_if_needed", ca.Function("extra_rti_step", [w, p], list(rti(w, p))), skip)
 
 
 def _inverse_plan(controller, est: Estimate, refs, u_last, N: int):
-    """``plan(needed)``: the inverse model's inputs for ``refs`` from the estimate ``est``
-    (bounded; a non-finite one replaced by ``u_last``) where ``needed`` is true, zeros where it
-    is false, through a switch, so that generated code computes the inverse only when needed."""
+    """``plan(needed)``: the inverse model's inputs for ``refs`` from the estimate ``est``.
+
+    The inputs (bounded; a non-finite one replaced by ``u_last``) where ``needed`` is true,
+    zeros where it is false, through a switch, so that generated code computes the inverse only
+    when needed.
+    """
     fields = {k: v for k, v in vars(est).items() if v is not None}
     symbols = {k: ca.MX.sym(k, ca.MX(v).sparsity()) for k, v in fields.items()}
     refs_s, u_last_s = ca.MX.sym("refs", N), ca.MX.sym("u_last")
@@ -441,8 +502,11 @@ def _inverse_plan(controller, est: Estimate, refs, u_last, N: int):
 
 def _symbolic(fun, what: str, arg, size: int,
               advice: str = "write it with casadi operations for a generated controller"):
-    """``fun(arg)`` on a CasADi symbol as a column of ``size`` entries, or :class:`NotGeneratable`
-    saying ``what`` has no CasADi form (then ``advice``) or gives the wrong length."""
+    """``fun(arg)`` on a CasADi symbol as a column of ``size`` entries.
+
+    Raises :class:`NotGeneratable` saying ``what`` has no CasADi form (then ``advice``) or gives
+    the wrong length.
+    """
     try:
         with warnings.catch_warnings():  # a NumPy-only function on a CasADi symbol warns before it fails
             warnings.simplefilter("ignore")
@@ -458,8 +522,9 @@ def _symbolic(fun, what: str, arg, size: int,
 
 
 class FunctionController:
-    """``feedback`` and ``prepare`` run in Python as a controller of :mod:`hystmpc.experiments.runner`
-    (to check them, and the generated C built from them, against the Python controller).
+    """``feedback`` and ``prepare`` run in Python as a controller of :mod:`hystmpc.experiments.runner`.
+
+    This is to check them, and the generated C built from them, against the Python controller.
 
     Parameters
     ----------

@@ -44,9 +44,11 @@ class DisturbanceEKF:
         self.P = np.eye(nx + nd)
 
     def _update_functions(self) -> tuple[ca.Function, ca.Function]:
-        """The time and measurement updates as CasADi Functions (matrix products as loops):
-        the Python filter and the generated controller (:mod:`hystmpc.mpc.embedded`) call the
-        same ones, so they round alike. ``Q`` and ``R`` are arguments: an observer may change them."""
+        """The time and measurement updates as CasADi Functions (matrix products as loops).
+
+        The Python filter and the generated controller (:mod:`hystmpc.mpc.embedded`) call the
+        same ones, so they round alike. ``Q`` and ``R`` are arguments: an observer may change them.
+        """
         nx, nd, nz = self.model.nx, self.model.nd, self.model.nz
         x, u, d = ca.MX.sym("x", nx), ca.MX.sym("u", self.model.nu), ca.MX.sym("d", nd)
         P, Q = ca.MX.sym("P", nx + nd, nx + nd), ca.MX.sym("Q", nx + nd, nx + nd)

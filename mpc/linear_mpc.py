@@ -42,8 +42,11 @@ class Compensation(Protocol):
         """The input actually sent this sample (input-driven memories follow it)."""
 
     def inputs_along(self, vs) -> np.ndarray:
-        """The actuator inputs that give the virtual inputs ``vs`` one after another from
-        the present memory, which is left as it is (NaN where one is out of reach)."""
+        """The actuator inputs that give the virtual inputs ``vs`` one after another.
+
+        They start from the present memory, which is left as it is (NaN where one is out of
+        reach).
+        """
 
     def sensors(self, measurement) -> np.ndarray:
         """The linear model's sensor vector for this measurement."""
@@ -85,8 +88,10 @@ def linearise(model: PredictionModel) -> dict[str, np.ndarray]:
 
 
 def one_sample_delay(sample_period: float) -> PredictionModel:
-    """The remainder of a feed-forward actuator whose inverse is exact and static: the output
-    is the virtual input one sample later; no sensors, no disturbance."""
+    """The remainder of a feed-forward actuator whose inverse is exact and static.
+
+    The output is the virtual input one sample later; no sensors, no disturbance.
+    """
     x, v, d = ca.SX.sym("x", 1), ca.SX.sym("v"), ca.SX.sym("d", 0)
     return PredictionModel(
         step=ca.Function("delay_step", [x, v, d], [v], ["x", "u", "d"], ["x_next"]),
@@ -215,9 +220,11 @@ class InverseLinearMpc:
         return u
 
     def plan(self, measurement, ref_window) -> np.ndarray:
-        """One sample's estimate and QP without sending anything: the planned actuator inputs
-        ``u_0..u_{N−1}`` (the virtual plan through the compensation, from its present memory;
-        NaN where out of reach). :meth:`applied` must then be told the input sent.
+        """One sample's estimate and QP without sending anything: the planned actuator inputs.
+
+        The planned inputs are ``u_0..u_{N−1}`` (the virtual plan through the compensation, from
+        its present memory; NaN where out of reach). :meth:`applied` must then be told the input
+        sent.
 
         This is the warm start ``nmpc.inverse_plan=linear-mpc`` gives the NMPC.
         """
@@ -226,8 +233,10 @@ class InverseLinearMpc:
         return np.asarray(self.compensation.inputs_along(virtual), float)
 
     def prepare_plan(self) -> None:
-        """Build what :meth:`plan` needs ahead of the first sample (the compensation's
-        compiled inverse over the horizon, where it has one)."""
+        """Build what :meth:`plan` needs ahead of the first sample.
+
+        That is the compensation's compiled inverse over the horizon, where it has one.
+        """
         prepare = getattr(self.compensation, "prepare_chain", None)
         if prepare is not None:
             prepare(self.horizon)
@@ -240,8 +249,11 @@ class InverseLinearMpc:
         self._started = True
 
     def _solve(self, measurement, ref_window) -> float:
-        """The estimate's updates and the QP: this sample's virtual input (the plan's first,
-        or after a failed QP the previous plan's next, or the last one held)."""
+        """The estimate's updates and the QP: this sample's virtual input.
+
+        The input is the plan's first, or after a failed QP the previous plan's next, or the
+        last one held.
+        """
         N = self.horizon
         ref = np.asarray(ref_window, float).ravel()[1: N + 1]
         self.compensation.update(measurement)

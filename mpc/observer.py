@@ -23,8 +23,8 @@ import numpy as np
 from hystmpc.models.base import symbolic
 from hystmpc.models.fractional import gl_weights, window_functions
 from hystmpc.models.prediction import CreepPredictionModel, InputMemory, PredictionModel
+from hystmpc.mpc.codegen.toolchain import compiled_or_slower
 from hystmpc.mpc.estimator import DisturbanceEKF
-from hystmpc.mpc.rti import compiled_or_slower
 
 
 @dataclass
@@ -177,8 +177,10 @@ class MemoryObserver:
             self.ekf.reset(x0 if self.split else self._state(x0), np.zeros(self.model.nd), self.initial_covariance)
 
     def update(self, z, u_last: float | None) -> bool:
-        """Run the exact memory with the input applied last sample (None: first sample), then
-        the EKF. Returns True when the estimate was not finite and restarted from ``z``."""
+        """Run the exact memory with the input applied last sample (None: first sample), then the EKF.
+
+        Returns True when the estimate was not finite and restarted from ``z``.
+        """
         if u_last is None:
             self._restart(z)
         else:
@@ -223,17 +225,21 @@ class MemoryObserver:
         return Estimate(x, self.d.copy(), self.hysteresis_state.copy(), history, np.array(self.queue))
 
     def condition(self, estimate: Estimate) -> np.ndarray:
-        """The problem's initial condition: ``[x; d]`` (Markov model) or the creep model's
-        ``[hysteresis state, x_dyn, d, history]``."""
+        """The problem's initial condition.
+
+        ``[x; d]`` (Markov model) or the creep model's ``[hysteresis state, x_dyn, d, history]``.
+        """
         if self.creeping:
             return np.concatenate((estimate.hysteresis, estimate.x, estimate.d, estimate.history))
         return np.concatenate((estimate.x, estimate.d))
 
 
 def exact_step(hysteresis, rest_input: float = 0.0) -> Callable:
-    """``(state, u) -> (state, y)`` of ``hysteresis`` in NumPy: its exact step evaluated as a
-    CasADi Function where the step accepts CasADi expressions (the same arithmetic as a
-    generated controller, to the last bit), else the model's own ``step``."""
+    """``(state, u) -> (state, y)`` of ``hysteresis`` in NumPy.
+
+    Its exact step evaluated as a CasADi Function where the step accepts CasADi expressions (the
+    same arithmetic as a generated controller, to the last bit), else the model's own ``step``.
+    """
     n = len(hysteresis.initial_state(rest_input))
     state, u = ca.SX.sym("state", n), ca.SX.sym("u")
     try:
@@ -325,9 +331,11 @@ def memory_inverse(memory: InputMemory, sample_period: float) -> Callable[[Estim
         return out
 
     def symbolic_inverse(est: Estimate, refs):
-        """The same steps on CasADi expressions, for a generated controller: an unreachable
-        target (the hysteresis model's symbolic ``inverse_step`` gives a NaN input) holds the
-        input and the state."""
+        """The same steps on CasADi expressions, for a generated controller.
+
+        An unreachable target (the hysteresis model's symbolic ``inverse_step`` gives a NaN
+        input) holds the input and the state.
+        """
         n, D = refs.shape[0], memory.delay_samples
         reached = ca.vertcat(*[refs[min(j + D, n - 1)] for j in range(n)])
         d = est.d[0] if est.d.numel() else 0.0

@@ -15,7 +15,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from hystmpc.mpc.rti import QP_TOLERANCE, compiled_or_in_process, feasible_guess, rti_steps
+from hystmpc.mpc.codegen.toolchain import compiled_or_in_process
+from hystmpc.mpc.rti import QP_TOLERANCE, feasible_guess, rti_steps
 from hystmpc.mpc.settings import InputBounds, NlpSettings, NmpcSettings, SolverSettings
 
 
@@ -122,8 +123,10 @@ class TrackingProblem:
             self.rti_cost = compiled_or_in_process(self.rti_cost)[0]
 
     def _solve_rti(self, w0, p, finish) -> Solution:
-        """``rti.iterations`` RTI steps from ``w0`` (one more if the last did not settle);
-        ``finish(w, finite)`` -> (u_plan, x_plan)."""
+        """``rti.iterations`` RTI steps from ``w0`` (one more if the last did not settle).
+
+        ``finish(w, finite)`` -> (u_plan, x_plan).
+        """
         rti = self.solvers.rti
         start = time.perf_counter()
         w, qp_error, iterations = rti_steps(self.rti, w0, p, rti.iterations, rti.extra_step_tolerance)

@@ -100,9 +100,11 @@ def _symbols(h_sparsity: ca.Sparsity, c_sparsity: ca.Sparsity) -> tuple[ca.SX, .
 
 
 def _residual(h_sparsity: ca.Sparsity, c_sparsity: ca.Sparsity) -> ca.Function:
-    """``(x, s_l, s_u, z_l, z_u, H, g, C, l, u) -> (residual, parts)`` on the normalised
-    problem: the largest of the scaled dual residual, primal infeasibility and mean
-    complementarity, and those three."""
+    """``(x, s_l, s_u, z_l, z_u, H, g, C, l, u) -> (residual, parts)`` on the normalised problem.
+
+    The largest of the scaled dual residual, primal infeasibility and mean complementarity, and
+    those three.
+    """
     m = c_sparsity.size1()
     x, s_l, s_u, z_l, z_u, H, g, C, l, u = _symbols(h_sparsity, c_sparsity)
     Cx = C @ x
@@ -125,8 +127,10 @@ def _step_to_boundary(v, dv):
 
 
 def _cholesky(K: list[list[ca.SX]]) -> list[list[ca.SX]]:
-    """Lower Cholesky factor of a symmetric positive definite K (rows of entries), unrolled (straight-line SX,
-    cheap to code-generate for the small matrices here)."""
+    """Lower Cholesky factor of a symmetric positive definite K (rows of entries), unrolled.
+
+    Straight-line SX, cheap to code-generate for the small matrices here.
+    """
     n = len(K)
     L = [[ca.SX(0)] * n for _ in range(n)]
     for j in range(n):
@@ -150,8 +154,10 @@ def _cholesky_solve(L: list[list[ca.SX]], b: ca.SX) -> ca.SX:
 
 
 def _newton_matrix(H: ca.SX, C: ca.SX, weights: ca.SX) -> list[list[ca.SX]]:
-    """``H + Cᵀ diag(weights) C`` entry by entry over C's nonzeros (CasADi's symbolic product
-    would treat the row-scaled C as dense)."""
+    """``H + Cᵀ diag(weights) C`` entry by entry over C's nonzeros.
+
+    CasADi's symbolic product would treat the row-scaled C as dense.
+    """
     n = C.size2()
     K = [[H[i, j] for j in range(n)] for i in range(n)]
     rows, cols = C.sparsity().get_triplet()
@@ -166,8 +172,10 @@ def _newton_matrix(H: ca.SX, C: ca.SX, weights: ca.SX) -> list[list[ca.SX]]:
 
 
 def _iteration(h_sparsity: ca.Sparsity, c_sparsity: ca.Sparsity) -> ca.Function:
-    """One Mehrotra predictor–corrector iteration on the normalised problem (SX; the
-    predictor and the corrector share one factorisation of the Newton matrix)."""
+    """One Mehrotra predictor–corrector iteration on the normalised problem.
+
+    In SX; the predictor and the corrector share one factorisation of the Newton matrix.
+    """
     m = c_sparsity.size1()
     x, s_l, s_u, z_l, z_u, H, g, C, l, u = _symbols(h_sparsity, c_sparsity)
     Cx = C @ x

@@ -5,19 +5,10 @@ Gauss–Newton Hessian ``JᵀJ`` is positive semidefinite and needs no convexifi
 step linearises the shooting and rate constraints at the warm start ``w``, solves the QP
 (DAQP, qrqp or the interior-point QP of :mod:`hystmpc.mpc.qp`), and returns ``w + Δw``.
 Wrapped as one Function ``rti_step(w, p) -> w_next``, the whole step can be code-generated
-and compiled (:func:`compile_function`), which is the ``rti-c`` variant.
+and compiled (:func:`hystmpc.mpc.codegen.compile_function`), which is the ``rti-c`` variant.
 """
 
 from __future__ import annotations
-
-import hashlib
-import logging
-import os
-import shlex
-import shutil
-import subprocess
-import time
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -146,8 +137,10 @@ def gauss_newton_step(linearise: ca.Function, cost: ca.Function, lower, upper, n
 
 
 def _lowest_cost_step(cost: ca.Function, w, step, p, full, full_cost, step_lengths: tuple[float, ...]):
-    """Of ``full = w + step`` (whose cost is ``full_cost``) and ``w + t step`` for each step
-    length ``t``, the one with the lowest cost (any cost beats a NaN or infinite one)."""
+    """The lowest-cost one of ``full = w + step`` and ``w + t step`` for each step length ``t``.
+
+    The cost of ``full`` is ``full_cost``; any cost beats a NaN or infinite one.
+    """
     w_next, best_cost = full, full_cost
     for t in step_lengths:
         trial = w + t * step
@@ -159,16 +152,20 @@ def _lowest_cost_step(cost: ca.Function, w, step, p, full, full_cost, step_lengt
 
 
 def _stationarity(H, g, A, x, lam_x, lam_a):
-    """Largest entry of ``Hx + g + λx + Aᵀλa`` (zero at a KKT point, CasADi's sign convention),
-    relative to the largest of the terms and 1."""
+    """Largest entry of ``Hx + g + λx + Aᵀλa``, relative to the largest of the terms and 1.
+
+    The expression is zero at a KKT point (CasADi's sign convention).
+    """
     Hx, A_lam = H @ x, A.T @ lam_a
     size = ca.fmax(1.0, ca.mmax(ca.fabs(ca.vertcat(Hx, g, lam_x, A_lam))))
     return ca.mmax(ca.fabs(Hx + g + lam_x + A_lam)) / size
 
 
 def _constraint_violation(Cx, l_mx, u_mx, lower, upper):
-    """Largest violation of ``l <= Cx <= u`` over the finite bounds, each row's divided by
-    the larger of its half width and 1."""
+    """Largest violation of ``l <= Cx <= u`` over the finite bounds.
+
+    Each row's is divided by the larger of its half width and 1.
+    """
     parts = [ca.MX(0)]
     width = np.where(np.isfinite(upper - lower), np.maximum((upper - lower) / 2, 1.0), 1.0)
     low, up = np.flatnonzero(np.isfinite(lower)), np.flatnonzero(np.isfinite(upper))
@@ -179,151 +176,14 @@ def _constraint_violation(Cx, l_mx, u_mx, lower, upper):
     return ca.mmax(ca.vertcat(*parts))
 
 
-def cache_dir() -> Path:
-    """Where compiled solvers and controllers are kept: ``$HYSTMPC_CACHE`` (compiled code
-    only), else :func:`user_cache_dir`."""
-    return Path(os.environ.get("HYSTMPC_CACHE") or user_cache_dir())
-
-
-def user_cache_dir() -> Path:
-    """hystmpc's cache: ``$HYSTMPC_CACHE_DIR``, else ``$XDG_CACHE_HOME/hystmpc``
-    (``~/.cache/hystmpc``)."""
-    if os.environ.get("HYSTMPC_CACHE_DIR"):
-        return Path(os.environ["HYSTMPC_CACHE_DIR"])
-    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "hystmpc"
-
-
-COMPILE_FLAGS = ("-O2", "-ffp-contract=off")
-"""Flags of the compiled step. ``-O2``: on pam's step (N = 20, 0.54 MB of C) it compiles in
-about 6 s and runs as fast as ``-O3`` (docs/realtime.md). ``-ffp-contract=off``: no fused
-multiply-adds, so the compiled step rounds as the in-process one does on any CPU."""
-
-LOG = logging.getLogger("hystmpc")
-
-
-def c_compiler() -> list[str] | None:
-    """The system C compiler as a command (``CC``, which may carry a launcher or options
-    such as ``ccache gcc``, or ``cc``) if its program is on the PATH, else None."""
-    try:
-        words = shlex.split(os.environ.get("CC", "")) or ["cc"]
-    except ValueError:  # an unbalanced quote: no command to run
-        return None
-    program = shutil.which(words[0])
-    return [program, *words[1:]] if program else None
-
-
-def compile_function(fun: ca.Function, out_dir: Path | None = None, flags=COMPILE_FLAGS) -> ca.Function:
-    """Generate C99 for ``fun``, compile it with the system C compiler and load it back.
-
-    Builds are cached by the hash of the generated source, the compiler command, the
-    flags and the QP library's include and link flags (:func:`library_flags`), so the same
-    problem compiles once; a compilation says what it does on the ``hystmpc`` logger.
-    Raises ``RuntimeError`` with the compiler's message on failure, and
-    :class:`CompilerNotFound` when there is no compiler.
-    """
-    out_dir = Path(out_dir) if out_dir is not None else cache_dir()
-    name = fun.name()
-    gen = ca.CodeGenerator(f"{name}.c", {"with_header": True})
-    gen.add(fun)
-    source = _accept_last_qp_iterate(gen.dump())
-    compiler = c_compiler()
-    include, libraries = library_flags(source)
-    key = source + " ".join([*(compiler or []), *flags, *include, *libraries])
-    digest = hashlib.sha256(key.encode()).hexdigest()[:16]
-    build = out_dir / f"{name}_{digest}"
-    library = build / f"{name}.so"
-    if not library.exists():
-        if compiler is None:
-            raise CompilerNotFound(f"no C compiler found (looked for {os.environ.get('CC', 'cc')!r} on the PATH)")
-        build.mkdir(parents=True, exist_ok=True)
-        gen.generate(str(build) + os.sep)
-        # private names, then an atomic rename: sweep workers may build the same step at once
-        private = f"{name}.{os.getpid()}"
-        (build / f"{private}.c").write_text(source)
-        cmd = [*compiler, *flags, *include, "-fPIC", "-shared", f"{private}.c", "-o", f"{private}.so", *libraries,
-               "-lm"]
-        command = " ".join(cmd[:len(compiler) + len(flags)])
-        LOG.info(f"compiling {name} ({len(source) / 1e3:.0f} kB of C) with {command}; once, cached in {build.parent}")
-        start = time.perf_counter()
-        done = subprocess.run(cmd, cwd=build, capture_output=True, text=True)
-        if done.returncode != 0:
-            raise RuntimeError(f"C compiler failed ({' '.join(cmd)}): {done.stderr.strip()[:2000]}")
-        os.replace(build / f"{private}.c", build / f"{name}.c")
-        os.replace(build / f"{private}.so", library)
-        LOG.info(f"compiled {name} in {time.perf_counter() - start:.1f} s")
-    return ca.external(name, str(library))
-
-
-def library_flags(source: str) -> tuple[list[str], list[str]]:
-    """``(include flags, libraries)`` that generated C needs beyond libm: DAQP's headers and
-    static library from the CasADi package when the source calls DAQP, else nothing."""
-    if "#include <daqp/" not in source:
-        return [], []
-    casadi_dir = Path(ca.__file__).parent
-    static = casadi_dir / "libdaqpstat.a"
-    if static.exists():
-        return [f"-I{casadi_dir / 'include'}"], [str(static)]
-    return [f"-I{casadi_dir / 'include'}"], [f"-L{casadi_dir}", "-ldaqp", f"-Wl,-rpath,{casadi_dir}"]
-
-
-class CompilerNotFound(RuntimeError):
-    """There is no C compiler to build the ``rti-c`` step with."""
-
-
-def compiled_or_slower(fun: ca.Function, notice: str, flags=COMPILE_FLAGS) -> ca.Function:
-    """``fun`` compiled (cached; the same numbers to the last bit), or ``fun`` itself after a
-    one-line notice, ``<why>: <notice>``, where it cannot be (no compiler, one that fails,
-    a cache it cannot write)."""
-    try:
-        return compile_function(fun, flags=flags)
-    except (RuntimeError, OSError) as exc:
-        LOG.warning(f"{str(exc)[:300]}: {notice}")
-        return fun
-
-
-def compiled_or_in_process(fun: ca.Function) -> tuple[ca.Function, bool]:
-    """``(fun compiled, True)``, or ``(fun, False)`` with a one-line notice when there is no C
-    compiler: ``rti-c`` then runs the same step in-process, as ``rti``."""
-    try:
-        return compile_function(fun), True
-    except CompilerNotFound as exc:
-        LOG.warning(f"{exc}: solver rti-c runs the same step in-process (as rti), slower")
-        return fun, False
-
-
-def _accept_last_qp_iterate(source: str) -> str:
-    """Make generated QP calls return their last iterate when they stop short, as the
-    in-process solvers do with ``error_on_fail: False`` (CasADi's C output ignores that option
-    and makes the whole call fail). The RTI step is then the same function in C and in
-    Python, and a failed QP is counted by ``qp_error`` instead of aborting the step.
-
-    qrqp: every status returns 0. DAQP: the step goes on whatever DAQP's exit, and when its
-    setup fails (an H that is not positive definite) the answer is NaN, so ``qp_error`` is
-    infinite."""
-    patched = source
-    if "casadi_qrqp" in source:
-        failing = "  } else if (d.status == QP_NO_SEARCH_DIR) {\n    return 4;\n  } else {\n    return -1;\n  }"
-        patched = patched.replace(failing, "  } else {\n    return 0;\n  }")
-        if "QP_NO_SEARCH_DIR) {\n    return 4;" in patched:
-            raise RuntimeError("could not patch the generated qrqp return codes; CasADi's output changed")
-    if "casadi_daqp_solve" in source:
-        setup_failed = "  if (flag<0) return 1;\n"
-        not_optimal = "  casadi_daqp_solve(d, arg, res, iw, w);\n  if (!d_qp.success) {\n    return -1;\n  }\n"
-        if setup_failed not in patched or not_optimal not in patched:
-            raise RuntimeError("could not patch the generated DAQP call; CasADi's output changed")
-        patched = patched.replace(setup_failed, "  if (flag<0) {\n    for (i=0;i<p_qp->nx;++i) d_qp->x[i] = 0.0/0.0;\n"
-                                                "    d_qp->success = 0;\n    return 1;\n  }\n")
-        patched = patched.replace(not_optimal, "  casadi_daqp_solve(d, arg, res, iw, w);\n")
-    return patched
-
-
 QP_TOLERANCE = 1e-6
 """A step whose ``qp_error`` exceeds this counts as a failed solve."""
 
 
 def feasible_guess(u_guess, u_prev: float, u_min: float, u_max: float, du_max: float) -> np.ndarray:
-    """The guess moved into ``u_min <= u <= u_max``, ``|u_k − u_{k−1}| <= du_max`` by clipping
-    each input in turn to what its predecessor allows.
+    """The guess moved into ``u_min <= u <= u_max``, ``|u_k − u_{k−1}| <= du_max``.
+
+    Each input is clipped in turn to what its predecessor allows.
 
     The backtracking RTI step takes fractions of the QP step; they stay feasible only when
     the step starts from a feasible point (a convex combination of two feasible points).
@@ -339,10 +199,13 @@ def feasible_guess(u_guess, u_prev: float, u_min: float, u_max: float, du_max: f
 
 def rti_steps(rti: ca.Function, w0, p, iterations: int,
               extra_step_tolerance: float = np.inf) -> tuple[np.ndarray, float, int]:
-    """``iterations`` RTI steps from ``w0``, and one more when the last moved an entry of the
-    iterate by more than ``extra_step_tolerance``; returns the last iterate, the worst
-    ``qp_error`` (NaN if any was; infinite when an iterate is not finite, which ends the steps:
-    an in-process QP refuses NaN bounds) and the steps taken."""
+    """``iterations`` RTI steps from ``w0``, and one more when the last moved the iterate enough.
+
+    The extra step comes when the last moved an entry of the iterate by more than
+    ``extra_step_tolerance``. Returns the last iterate, the worst ``qp_error`` (NaN if any was;
+    infinite when an iterate is not finite, which ends the steps: an in-process QP refuses NaN
+    bounds) and the steps taken.
+    """
     w, worst = np.asarray(w0, float), 0.0
     taken, moved = 0, np.inf
     while taken < iterations or (taken == iterations and moved > extra_step_tolerance):

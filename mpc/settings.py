@@ -96,9 +96,11 @@ class NmpcSettings:
         _check_finite(self, ("q_output",), strict=True)
 
     def check_combination(self, solvers: SolverSettings | None = None) -> None:
-        """``ValueError`` for settings that cannot go together, also with the ``solvers``
-        given (checked when the controller is built, and before any work by the command
-        line, after all ``--set``)."""
+        """``ValueError`` for settings that cannot go together, also with the ``solvers`` given.
+
+        Checked when the controller is built, and before any work by the command line, after
+        all ``--set``.
+        """
         if self.multistart and self.solver not in MULTISTART_SOLVERS:
             raise ValueError(f"nmpc.multistart compares the costs that solver gn or the RTI step reports, from the "
                              f"shifted plan and from the inverse model's inputs; nmpc.solver is {self.solver!r} "

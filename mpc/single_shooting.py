@@ -14,13 +14,9 @@ import time
 import casadi as ca
 import numpy as np
 
+from hystmpc.mpc.codegen.toolchain import compiled_or_slower
 from hystmpc.mpc.problem import Solution, TrackingProblem
-from hystmpc.mpc.rti import (
-    REGULARISATION,
-    compiled_or_slower,
-    gauss_newton_step,
-    rti_function,
-)
+from hystmpc.mpc.rti import REGULARISATION, gauss_newton_step, rti_function
 from hystmpc.mpc.settings import InputBounds, NmpcSettings, SolverSettings
 
 GN_COMPILE_FLAGS = ("-O1", "-ffp-contract=off")
@@ -29,9 +25,11 @@ GN_COMPILE_FLAGS = ("-O1", "-ffp-contract=off")
 
 
 class BufferedEvaluation:
-    """A CasADi Function called through its zero-copy buffers, on dense NumPy values: the
-    same numbers as a call, without its conversions (on dea's Gauss–Newton evaluation and QP
-    they cost more than the compiled evaluation itself)."""
+    """A CasADi Function called through its zero-copy buffers, on dense NumPy values.
+
+    The same numbers as a call, without its conversions (on dea's Gauss–Newton evaluation and QP
+    they cost more than the compiled evaluation itself).
+    """
 
     def __init__(self, fun: ca.Function):
         def layout(shape, sparsity):
@@ -52,8 +50,10 @@ class BufferedEvaluation:
             self._buffer.set_res(i, memoryview(a))
 
     def __call__(self, *args, **named) -> list[np.ndarray]:
-        """The outputs as new dense arrays (column vectors as 1-D); inputs by position or
-        name, dense, the ones not given at the Function's defaults."""
+        """The outputs as new dense arrays (column vectors as 1-D).
+
+        Inputs by position or name, dense, the ones not given at the Function's defaults.
+        """
         if len(args) > len(self._names):
             raise ValueError(f"{len(args)} arguments for a Function of {len(self._names)} inputs")
         given = dict(enumerate(args))
@@ -153,8 +153,11 @@ class SingleShootingProblem(TrackingProblem):
         self._uses_nlp_solver({"x": U, "f": cost, "g": du if rate_bounded else ca.SX(0, 1), "p": params})
 
     def _linearisation(self, n_params: int) -> tuple[ca.Function, ca.Function]:
-        """``linearise(U, params) -> (H, Jᵀr, A, g, Σ r²)`` and ``cost(U, params)`` from the model's
-        ``predict_jacobian`` and ``compact_predict`` (see :func:`hystmpc.mpc.rti.gauss_newton_step`)."""
+        """``linearise(U, params) -> (H, Jᵀr, A, g, Σ r²)`` and ``cost(U, params)``.
+
+        Both from the model's ``predict_jacobian`` and ``compact_predict`` (see
+        :func:`hystmpc.mpc.rti.gauss_newton_step`).
+        """
         s, N, n = self.settings, self.horizon, self.n_condition
         U, params = ca.MX.sym("U", N), ca.MX.sym("params", n_params)
         p, u_prev, ref, u_ff = params[:n], params[n], params[n + 1: n + 1 + N], params[n + 1 + N:]
@@ -217,8 +220,7 @@ class SingleShootingProblem(TrackingProblem):
         self._compile_rti()
 
     def _solve_gauss_newton(self, u, p):
-        """Gauss–Newton SQP: QP on JᵀJ, backtracking on the cost; returns
-        (u, ok, status, iters, cost at u)."""
+        """Gauss–Newton SQP: QP on JᵀJ, backtracking on the cost; returns (u, ok, status, iters, cost at u)."""
         gn, N = self.solvers.gn, self.horizon
         u_prev = p[self.n_condition]
         res, J = self._gn_buffered(u, p)

@@ -1,5 +1,6 @@
-"""Simulated actuators (the truth the controllers never see directly), and each actuator's
-prediction model beside its physics.
+"""Simulated actuators (the truth the controllers never see directly) and their prediction models.
+
+Each actuator's prediction model is beside its physics.
 
 Every plant follows :class:`Plant`: ``reset(seed) -> Measurement``, ``step(u) ->
 Measurement`` and ``sample_period``; it runs the exact, non-smooth hysteresis with its own

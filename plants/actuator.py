@@ -141,10 +141,10 @@ class HysteresisActuator:
 
 
 class BlendedActuator:
-    """Two noise-free actuators driven by the same inputs; the output ``(1 − w)·y_a + w·y_b``
-    plus sensor noise. With two models fitted to one record, ``w`` sets how far the plant
-    moves from ``a`` toward ``b``: a truth that differs from a model as much as the actuator
-    does.
+    """Two noise-free actuators driven by the same inputs; the output ``(1 − w)·y_a + w·y_b`` plus sensor noise.
+
+    With two models fitted to one record, ``w`` sets how far the plant moves from ``a`` toward
+    ``b``: a truth that differs from a model as much as the actuator does.
 
     Parameters
     ----------

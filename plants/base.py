@@ -29,8 +29,11 @@ class Plant(Protocol):
         """Sample period (s)."""
 
     def reset(self, seed: int) -> Measurement:
-        """Back to rest, sensor noise seeded with ``seed``; the first measurement, read before
-        any input is applied (a rig holds its rest input, settles, then reads its sensors)."""
+        """Back to rest, sensor noise seeded with ``seed``; the first measurement.
+
+        The measurement is read before any input is applied (a rig holds its rest input,
+        settles, then reads its sensors).
+        """
 
     def step(self, u: float) -> Measurement:
         """Apply ``u`` for one sample; the measurement at the end of it."""

@@ -143,8 +143,10 @@ def prediction_model(p: CompliantParams, eps: float, substeps: int = 2,
 
 
 def inverse_inputs(p: CompliantParams, x, d, refs):
-    """Motor angles that the inverse model gives for ``refs − d`` from the state ``x`` of
-    :func:`prediction_model` (NumPy, or CasADi expressions for a generated controller)."""
+    """Motor angles that the inverse model gives for ``refs − d`` from the state ``x`` of :func:`prediction_model`.
+
+    NumPy, or CasADi expressions for a generated controller.
+    """
     hys: PowerFunctionHysteresis = p.hysteresis
     if symbolic(x):
         st, tau = ca.SX.sym("state", 6), ca.SX.sym("tau")  # one Function called per sample: small C
@@ -165,8 +167,7 @@ def inverse_inputs(p: CompliantParams, x, d, refs):
 
 
 def initial_state(p: CompliantParams, z):
-    """Model state at rest from the first sensor vector ``[motor angle, torque]`` (NumPy, or
-    CasADi expressions)."""
+    """Model state at rest from the first sensor vector ``[motor angle, torque]`` (NumPy, or CasADi expressions)."""
     if symbolic(z):
         s = p.geometry.s(z[0], xp=ca)
         return ca.vertcat(z[0], 0.0, p.hysteresis.initial_state(s), ca.repmat(z[0], p.command_delay, 1))
@@ -175,10 +176,12 @@ def initial_state(p: CompliantParams, z):
 
 
 def linear_model(p: CompliantParams, substeps: int = 2) -> PredictionModel:
-    """The servo alone, in torque units, for ``inverse-lmpc``: the virtual torque ``v`` (the
-    power-function model's output that the inverse compensation realises) follows the command
-    as θ1 does, ``x = [τ_v, τ_v', q_1..q_D]``, ``y = τ_v + d``. Sensors: ``τ_v`` (the
-    model's torque at the measured motor angle) and the torque."""
+    """The servo alone, in torque units, for ``inverse-lmpc``.
+
+    The virtual torque ``v`` (the power-function model's output that the inverse compensation
+    realises) follows the command as θ1 does, ``x = [τ_v, τ_v', q_1..q_D]``, ``y = τ_v + d``.
+    Sensors: ``τ_v`` (the model's torque at the measured motor angle) and the torque.
+    """
     D = p.command_delay
     x, v, d = ca.SX.sym("x", 2 + D), ca.SX.sym("v"), ca.SX.sym("d")
     command = x[2] if D else v

@@ -106,7 +106,7 @@ def prediction_model(p: DeaParams, eps: float, direction_eps: float | None = Non
     """The NMPC's model: smooth FCKP in volts, the GL creep integral, the nominal mechanics.
 
     ``d`` adds to the FCKP output W (an input disturbance); the sensor is the laser. The
-    creep history is a parameter of the horizon prediction (design/nmpc.md). With
+    creep history is a parameter of the horizon prediction (docs/dea.md, "Model"). With
     ``learn_gain``, ``d = [offset, e]``: the mechanics see ``(1 + e) W + offset``, ``e`` a
     relative error of the stroke (the static gain) that the estimator learns, used within
     :data:`LEARNED_GAIN_RANGE`.
@@ -129,9 +129,12 @@ def prediction_model(p: DeaParams, eps: float, direction_eps: float | None = Non
 
 
 def linear_model(p: DeaParams, operating_point: float = 1.5, substeps: int = 2) -> PredictionModel:
-    """The mechanics linearised at ``x1 = operating_point`` (mm), driven by the FCKP output W
-    (the virtual input of ``inverse-lmpc``) plus an input disturbance ``d`` (mm, as in
-    :func:`prediction_model`); the creep is left to ``d``. Sensor: the laser."""
+    """The mechanics linearised at ``x1 = operating_point`` (mm).
+
+    They are driven by the FCKP output W (the virtual input of ``inverse-lmpc``) plus an input
+    disturbance ``d`` (mm, as in :func:`prediction_model`); the creep is left to ``d``. Sensor:
+    the laser.
+    """
     x, w, d = ca.SX.sym("x", 2), ca.SX.sym("w"), ca.SX.sym("d")
     x0 = ca.DM([operating_point, 0.0])
     w0 = float(steady_output_input(p, operating_point))

@@ -146,10 +146,12 @@ def joint_acceleration(p: PamJointParams, theta_deg, omega_deg, dp, dp_hys, extr
 
 
 def joint_rhs(p: PamJointParams, x, dp_cmd, dp_hys, extra_torque, xp=np, wn_scale=None, zeta_scale=None) -> list:
-    """Time derivative of ``x = [θ, ω, Δp, Δp']`` (deg, deg/s, bar, bar/s) for the plant and
-    the NMPC's model alike (see module docstring; the slew limit is the plant's own).
-    ``wn_scale`` and ``zeta_scale`` scale the pressure loop's natural frequency and damping
-    ratio (an estimator's corrections; None: 1)."""
+    """Time derivative of ``x = [θ, ω, Δp, Δp']`` (deg, deg/s, bar, bar/s).
+
+    For the plant and the NMPC's model alike (see module docstring; the slew limit is the
+    plant's own). ``wn_scale`` and ``zeta_scale`` scale the pressure loop's natural frequency
+    and damping ratio (an estimator's corrections; None: 1).
+    """
     theta, omega, dp, ddp = x[0], x[1], x[2], x[3]
     acc = joint_acceleration(p, theta, omega, dp, dp_hys, extra_torque, xp)
     wn = p.pressure_wn if wn_scale is None else p.pressure_wn * wn_scale
@@ -214,8 +216,9 @@ def prediction_model(p: PamJointParams, eps: float, direction_eps: float | None 
 
 
 def inverse_inputs(p: PamJointParams, x, d, refs, gain: bool = False):
-    """Static inverse along the reference: Δp_cons(r) + Δp_hys(path) − d/a(r), eqs. (2)–(3),
-    from the state ``x`` of :func:`prediction_model` (NumPy, or CasADi expressions for a
+    """Static inverse along the reference: Δp_cons(r) + Δp_hys(path) − d/a(r), eqs. (2)–(3).
+
+    From the state ``x`` of :func:`prediction_model` (NumPy, or CasADi expressions for a
     generated controller).
 
     The command reaches the pressure ``D`` samples later, so input ``j`` aims at ``r_{j+D}``.
@@ -244,10 +247,12 @@ def inverse_inputs(p: PamJointParams, x, d, refs, gain: bool = False):
 
 
 def rest_state(p: PamJointParams, z):
-    """State of :func:`prediction_model` at rest from the sensor vector ``[θ, Δp]``: relaxed
-    hysteresis, and a delay line holding the measured pressure (at rest the command is the
-    pressure, so a joint started pressurised is not predicted to vent; NumPy, or CasADi
-    expressions)."""
+    """State of :func:`prediction_model` at rest from the sensor vector ``[θ, Δp]``.
+
+    Relaxed hysteresis, and a delay line holding the measured pressure (at rest the command is
+    the pressure, so a joint started pressurised is not predicted to vent; NumPy, or CasADi
+    expressions).
+    """
     D, M = p.delay_samples, p.hysteresis.n_elements
     if symbolic(z):
         return ca.vertcat(z[0], 0.0, z[1], 0.0, ca.DM.zeros(M), *([z[1]] * D))
@@ -284,8 +289,10 @@ def linear_model(p: PamJointParams, substeps: int = 2) -> PredictionModel:
 
 
 def static_compensation(p: PamJointParams, theta_deg: float) -> float:
-    """What :func:`linear_model` leaves out of the static balance at angle θ (bar):
-    ``Δp_cons(θ) − Δp_cons'(0) θ``, eq. (2) minus its slope at 0."""
+    """What :func:`linear_model` leaves out of the static balance at angle θ (bar).
+
+    ``Δp_cons(θ) − Δp_cons'(0) θ``, eq. (2) minus its slope at 0.
+    """
     slope = (p.passive_stiffness + p.payload_kg * GRAVITY * p.lever_m) * DEG / p.torque_per_bar
     return float(constraint_pressure(p, theta_deg)) - slope * theta_deg
 
@@ -324,10 +331,13 @@ class PamJoint(ParametrisedPlant):
         return self._measure()
 
     def _sample_function(self) -> ca.Function:
-        """One sample of the truth as a CasADi Function ``(x, hysteresis state, t, Δp_cmd) ->
-        (x, hysteresis state)``: ``substeps`` RK4 steps, each followed by the slew limit and
-        the exact Maxwell-slip update (clips, not smoothed). Built once per plant; evaluating
-        it is about 100 times faster than the same arithmetic in NumPy scalars."""
+        """One sample of the truth as a CasADi Function.
+
+        The Function ``(x, hysteresis state, t, Δp_cmd) -> (x, hysteresis state)`` takes
+        ``substeps`` RK4 steps, each followed by the slew limit and the exact Maxwell-slip update
+        (clips, not smoothed). Built once per plant; evaluating it is about 100 times faster than
+        the same arithmetic in NumPy scalars.
+        """
         if getattr(self, "_sample", None) is None:
             self._sample = _sample_function(self.params)
         return self._sample

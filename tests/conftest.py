@@ -27,6 +27,6 @@ def private_cache(tmp_path_factory):
     Compiled solvers stay where they were (they depend on nothing a test changes)."""
     import os
 
-    from hystmpc.mpc.rti import cache_dir
+    from hystmpc.mpc.codegen import cache_dir
     os.environ["HYSTMPC_CACHE"] = str(cache_dir())
     os.environ["HYSTMPC_CACHE_DIR"] = str(tmp_path_factory.mktemp("cache"))

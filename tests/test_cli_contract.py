@@ -210,7 +210,7 @@ def test_version(capsys):
 
 def test_a_reference_file_keeps_the_named_scenarios_conditions(tmp_path):
     from hystmpc.experiments.benches import get_bench
-    from hystmpc.experiments.cli import _scenario
+    from hystmpc.experiments.cli.run import _scenario
     bench = get_bench("reluctance")
     named = bench.scenarios["ramp-1.2mm"]
     assert named.conditions  # the gap it runs at

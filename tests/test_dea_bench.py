@@ -187,14 +187,13 @@ def test_the_plants_creep_causes_almost_none_of_bics_error_on_composite():
 def test_gn_compiled_gives_the_in_process_numbers_to_the_last_bit(monkeypatch, caplog):
     """gn compiles its residual and Jacobian; without a compiler it evaluates them in-process,
     after a notice, and the numbers are the same bit for bit (so are the closed loops)."""
-    from hystmpc.mpc import rti
-    from hystmpc.mpc.rti import CompilerNotFound
+    from hystmpc.mpc.codegen import CompilerNotFound, toolchain
     compiled = BENCH.build_controller("nmpc", BENCH.configure()).problem
 
     def no_compiler(*_, **__):
         raise CompilerNotFound("no C compiler found (test)")
 
-    monkeypatch.setattr(rti, "compile_function", no_compiler)
+    monkeypatch.setattr(toolchain, "compile_function", no_compiler)
     in_process = BENCH.build_controller("nmpc", BENCH.configure()).problem
     assert "evaluates its residual and Jacobian in-process" in caplog.text
     rng = np.random.default_rng(1)

@@ -6,7 +6,8 @@ import inspect
 
 import pytest
 
-PARTS = ("hystmpc.models", "hystmpc.plants", "hystmpc.mpc", "hystmpc.experiments")
+PARTS = ("hystmpc.models", "hystmpc.plants", "hystmpc.mpc", "hystmpc.mpc.codegen", "hystmpc.experiments",
+         "hystmpc.experiments.baselines")
 
 
 def _undocumented(part: str) -> list[str]:

@@ -1,4 +1,4 @@
-"""The whole controller as CasADi Functions (mpc.embedded) and as generated C (experiments.firmware)."""
+"""The whole controller as CasADi Functions (mpc.embedded) and as generated C (mpc.codegen, experiments.firmware)."""
 
 from dataclasses import replace
 

@@ -1,5 +1,5 @@
 """A (non-editable) install puts one package, ``hystmpc``, into site-packages, and it works
-from any directory."""
+from any directory (the C templates of code generation included)."""
 
 import shutil
 import subprocess
@@ -25,6 +25,9 @@ def test_install_holds_hystmpc_only_and_imports_from_elsewhere(tmp_path):
     assert {p.name for p in (site / "hystmpc").iterdir()} >= set(PARTS)
     assert (site / "hystmpc" / "experiments" / "benches" / "pam.py").is_file()
     probe = ("import hystmpc.mpc, hystmpc.models, hystmpc.plants, hystmpc.experiments, hystmpc.experiments.benches.dea;"
+             "import hystmpc.experiments.cli, hystmpc.experiments.baselines;"
+             "from hystmpc.mpc.codegen.toolchain import template;"
+             "assert '{name}_init' in template('controller.h.in') and 'rti_step' in template('step_main.c');"
              "print(hystmpc.models.__file__)")
     done = subprocess.run([sys.executable, "-c", probe], cwd=tmp_path, capture_output=True, text=True, timeout=120,
                           env={"PYTHONPATH": str(site), "PATH": "/usr/bin:/bin"})

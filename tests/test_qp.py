@@ -6,8 +6,9 @@ import osqp
 import pytest
 import scipy.sparse as sp
 
+from hystmpc.mpc.codegen import CompilerNotFound, c_compiler, compile_function
 from hystmpc.mpc.qp import interior_point_qp
-from hystmpc.mpc.rti import CompilerNotFound, c_compiler, compile_function, gauss_newton_step, rti_steps
+from hystmpc.mpc.rti import gauss_newton_step, rti_steps
 
 N = 10
 RATES = np.eye(N) - np.eye(N, k=-1)

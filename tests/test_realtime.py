@@ -266,7 +266,7 @@ def test_runtime_c_runs_the_generated_controller_with_the_python_controllers_inp
     import numpy as np
 
     from hystmpc.experiments.benches import get_bench
-    from hystmpc.mpc.rti import c_compiler
+    from hystmpc.mpc.codegen import c_compiler
     if c_compiler() is None:
         pytest.skip("no C compiler")
     monkeypatch.setenv("HYSTMPC_CACHE", str(tmp_path))
@@ -292,7 +292,7 @@ def test_runtime_auto_runs_the_generated_controller_where_it_can(tmp_path, monke
     solver and a C compiler; the Python controller with another solver, and without a
     compiler after a notice, where ``runtime=c`` is refused."""
     from hystmpc.experiments import firmware
-    from hystmpc.mpc.rti import c_compiler
+    from hystmpc.mpc.codegen import c_compiler
     if c_compiler() is None:
         pytest.skip("no C compiler")
     monkeypatch.setenv("HYSTMPC_CACHE", str(tmp_path))

@@ -14,15 +14,14 @@ import pytest
 
 from hystmpc.experiments.cli import main
 from hystmpc.experiments.sweep import (
-    SweepSpec,
-    load_spec,
     make_tasks,
     perturbation_factors,
     read_records,
     run_sweep,
     scaled_assignments,
-    summarize,
 )
+from hystmpc.experiments.sweep_spec import SweepSpec, load_spec
+from hystmpc.experiments.sweep_summary import summarize
 
 
 def _spec_file(tmp_path: Path, text: str, name: str = "spec.toml") -> Path:

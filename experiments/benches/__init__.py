@@ -70,8 +70,10 @@ def is_actuator_file(name: str) -> bool:
 
 
 def get_bench(name: str) -> Bench:
-    """The bench called ``name`` (or in the actuator file ``name``); ``ValueError`` naming
-    the allowed ones otherwise."""
+    """The bench called ``name`` (or in the actuator file ``name``).
+
+    ``ValueError`` naming the allowed ones otherwise.
+    """
     if name in _FACTORIES:
         return _FACTORIES[name]()
     if is_actuator_file(name):

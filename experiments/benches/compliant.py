@@ -89,9 +89,12 @@ def build_nmpc(config: dict) -> NmpcController:
 
 
 def build_inverse_lmpc(config: dict) -> InverseLinearMpc:
-    """``inverse-lmpc``: the inverse power-function model in series with the motor command
-    (its memory follows the measured motor angle), and a linear MPC on the servo in torque
-    units, with the NMPC's horizon, bounds, preview and output disturbance."""
+    """``inverse-lmpc``: the inverse power-function model and a linear MPC on the servo.
+
+    The inverse power-function model is in series with the motor command (its memory follows the
+    measured motor angle), and the linear MPC on the servo is in torque units, with the NMPC's
+    horizon, bounds, preview and output disturbance.
+    """
     model: CompliantParams = config["model"]
     geometry = model.geometry
     compensation = InverseCompensation(

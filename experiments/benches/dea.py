@@ -17,7 +17,7 @@ Controllers (all see the laser displacement; none knows the plant's true paramet
   the applied voltages) and a linear MPC on the mechanics linearised at 1.5 mm, with the
   NMPC's horizon, bounds, preview and input disturbance (creep and mismatch land in it);
 * ``nmpc``: single-shooting NMPC on the smooth FCKP model with the GL sum split into
-  in-horizon terms and a history term computed outside the NLP (design/nmpc.md), solved
+  in-horizon terms and a history term computed outside the NLP, solved
   from its shifted plan and from ``inverse-lmpc``'s plan each sample; its EKF learns the
   stroke as well as an offset.
 
@@ -32,10 +32,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from hystmpc.experiments.baselines import InverseCompensation, PidController, PidGains
+from hystmpc.experiments.baselines.dea_backstepping import Backstepping, BicSettings
+from hystmpc.experiments.baselines.dea_linear_mpc import DeaLinearMpc, DeaLinearMpcSettings
 from hystmpc.experiments.bench import SINGLE_SHOOTING, Bench, ControllerSpec
-from hystmpc.experiments.benches.dea_backstepping import Backstepping, BicSettings
-from hystmpc.experiments.benches.dea_linear_mpc import LinearMpc, LinearMpcSettings
 from hystmpc.experiments.runner import Scenario
+from hystmpc.experiments.signals import after_approach, square_wave, triangle_wave
 from hystmpc.models.fckp import Fckp
 from hystmpc.models.prediction import Smoothing
 from hystmpc.mpc import (
@@ -47,8 +48,7 @@ from hystmpc.mpc import (
     RtiSettings,
     SolverSettings,
 )
-from hystmpc.mpc.linear_mpc import InverseLinearMpc
-from hystmpc.mpc.linear_mpc import LinearMpcSettings as InverseLmpcSettings
+from hystmpc.mpc.linear_mpc import InverseLinearMpc, LinearMpcSettings
 from hystmpc.plants.dea import DeaActuator, DeaParams, linear_model, prediction_model
 
 NOMINAL = DeaParams()
@@ -96,18 +96,19 @@ class MemorySettings:
 
 @dataclass(frozen=True)
 class EstimatorNoise:
-    """The NMPC's EKF (``--set estimator.KEY=VALUE``): it estimates the membrane's
-    displacement and velocity, an offset ``d`` on the FCKP output W and, unless ``gain`` is
-    0, a relative error ``e`` of W's gain (the stroke), both random walks. The mechanics then
-    see ``(1 + e) W + d``. An offset alone leaves a membrane whose stroke is off with an error
-    that moves with W; on the sweep's membranes that made the difference against
-    ``inverse-lmpc`` (docs/dea.md)."""
+    """The NMPC's EKF (``--set estimator.KEY=VALUE``).
+
+    It estimates the membrane's displacement and velocity, an offset ``d`` on the FCKP output W
+    and, unless ``gain`` is 0, a relative error ``e`` of W's gain (the stroke), both random walks.
+    The mechanics then see ``(1 + e) W + d``: an offset alone leaves an error that moves with W on
+    a membrane whose stroke is off (docs/dea.md).
+    """
 
     disturbance: float = 1e-6
     """Variance per sample of the offset d (mm²)."""
     gain: float = 1e-7
-    """Variance per sample of the relative gain error e (0: not estimated). 1e-6 let e and d
-    trade off on a membrane with a 19 % longer stroke until the input saturated."""
+    """Variance per sample of the relative gain error e (0: not estimated); larger values let e
+    and d trade off (docs/dea.md)."""
     initial: float = 0.04
     """Variance of e before the first measurement (0.04: a standard deviation of 20 %)."""
 
@@ -124,10 +125,11 @@ class EstimatorNoise:
 
 
 def build_nmpc(config: dict) -> NmpcController:
-    """NMPC with the FCKP model: the controller's own exact FCKP (creep memory with window
-    L) gives W for the estimator and the history terms; an EKF estimates [x1, x2], a W
-    offset d and (``estimator.gain`` > 0) W's relative gain error from the laser; the
-    problem is single shooting (the creep is not Markov).
+    """NMPC with the FCKP model, an EKF and single shooting.
+
+    The controller's own exact FCKP (creep memory with window L) gives W for the estimator and
+    the history terms; an EKF estimates [x1, x2], a W offset d and (``estimator.gain`` > 0) W's
+    relative gain error from the laser; the problem is single shooting (the creep is not Markov).
 
     Warm start: the shifted previous plan; at start-up and after a failed solve, the
     inverse-model inputs: ``inverse-lmpc``'s plan (``nmpc.inverse_plan=linear-mpc``, the
@@ -159,22 +161,7 @@ def build_inverse_lmpc(config: dict) -> InverseLinearMpc:
 
 def _with_approach(name: str, description: str, core) -> Scenario:
     """The paper's 40 s reference ``core(t)`` after a 2 s raised-cosine approach from 0."""
-    start = float(core(np.zeros(1))[0])
-
-    def reference(t):
-        t = np.asarray(t, float)
-        ramp = start * 0.5 * (1 - np.cos(np.pi * np.clip(t / APPROACH, 0.0, 1.0)))
-        return np.where(t < APPROACH, ramp, core(t - APPROACH))
-    return Scenario(name, description, APPROACH + 40.0, reference)
-
-
-def _triangle(t):
-    phase = np.mod(np.asarray(t, float) / 2.0 + 0.25, 1.0)  # period 2 s, starts at the mean, rising
-    return 1.0 + 0.2 * (4 * np.abs(phase - 0.5) - 1) * -1
-
-
-def _square(t):
-    return 1.0 + 0.2 * np.where(np.mod(np.asarray(t, float), 4.0) < 2.0, 1.0, -1.0)
+    return Scenario(name, description, APPROACH + 40.0, after_approach(core, APPROACH))
 
 
 def _scenarios() -> dict[str, Scenario]:
@@ -185,8 +172,9 @@ def _scenarios() -> dict[str, Scenario]:
         _with_approach("composite", "0.2 sin(0.4πt) + 0.4 sin(0.2πt) + 0.6 sin(0.6πt) + 2 mm, 40 s (Table 3)",
                        lambda t: 0.2 * np.sin(0.4 * pi * t) + 0.4 * np.sin(0.2 * pi * t)
                        + 0.6 * np.sin(0.6 * pi * t) + 2.0),
-        _with_approach("triangle", "triangle 1.0 ± 0.2 mm, period 2 s, 40 s (Fig. 17)", _triangle),
-        _with_approach("square", "square 1.0 ± 0.2 mm, period 4 s, 40 s (Fig. 18)", _square),
+        _with_approach("triangle", "triangle 1.0 ± 0.2 mm, period 2 s, 40 s (Fig. 17)",
+                       triangle_wave(1.0, 0.2, 2.0)),
+        _with_approach("square", "square 1.0 ± 0.2 mm, period 4 s, 40 s (Fig. 18)", square_wave(1.0, 0.2, 4.0)),
     ]
     return {s.name: s for s in out}
 
@@ -194,9 +182,9 @@ def _scenarios() -> dict[str, Scenario]:
 def _defaults() -> dict:
     return {"plant": PLANT, "model": NOMINAL, "memory": MemorySettings(), "estimator": EstimatorNoise(),
             "pid": PidGains(kp=0.8, ki=1.67, kd=0.01), "bic": BicSettings(),
-            "linear_mpc": LinearMpcSettings(),
+            "linear_mpc": DeaLinearMpcSettings(),
             # r_rate: the least mean RMSE of 1, 0.3, 0.1, 0.03, 0.01 (docs/dea.md)
-            "lmpc": InverseLmpcSettings(horizon=15, q_output=1e4, r_rate=0.03),
+            "lmpc": LinearMpcSettings(horizon=15, q_output=1e4, r_rate=0.03),
             # two starts, the shifted plan and inverse-lmpc's plan (which sees the dynamics and the
             # disturbance, unlike the static inverse), let the voltage jump across a hysteresis loop
             # where it must; r_input keeps the refined plan near the linear MPC's (docs/dea.md)
@@ -205,9 +193,8 @@ def _defaults() -> dict:
             "smoothing": Smoothing(eps=1e-4, direction_eps=3e-5),
             # ftol: a Gauss-Newton solve that crawls (step fractions of 1/256 lowering the cost by
             # 0.03 % per iteration) stops as converged instead of failing at max_iter (docs/dea.md)
-            # rti (and the generated controller): 3 Gauss-Newton steps per sample (1 step left
-            # single-sine at 0.0156 mm, 2-5 steps at 0.0052-0.0060) and the generated interior-point
-            # QP: with DAQP's workspace the C controller needs 66.6 kB of RAM, with it 61.4 kB (docs/dea.md)
+            # rti (and the generated controller): 3 Gauss-Newton steps per sample, and the generated
+            # interior-point QP, which needs less RAM than DAQP's workspace (docs/dea.md)
             "solver": replace(SolverSettings().uniform(max_iter=60, tol=1e-3, ftol=1e-3),
                               rti=RtiSettings(iterations=3, qp="ipm"))}
 
@@ -225,7 +212,7 @@ def _controllers() -> dict[str, ControllerSpec]:
         "bic": ControllerSpec("bic", "backstepping implicit-inverse adaptive control with creep inverse",
                               backstepping(True), ("model", "bic", "memory")),
         "linear-mpc": ControllerSpec("linear-mpc", "linear MPC (OSQP), Np 15, Nc 5, Section 5.2 weights",
-                                     lambda c: LinearMpc(c["linear_mpc"], c["model"]), ("model", "linear_mpc")),
+                                     lambda c: DeaLinearMpc(c["linear_mpc"], c["model"]), ("model", "linear_mpc")),
         "inverse-lmpc": ControllerSpec("inverse-lmpc", "inverse FCKP model + linear MPC (OSQP)", build_inverse_lmpc,
                                        ("model", "lmpc")),
         "nmpc": ControllerSpec("nmpc", "NMPC on the smooth FCKP model, GL history as parameters", build_nmpc,

@@ -52,8 +52,9 @@ creep drift over 20 s (vo2012 Section 1: creep makes the joint time-varying)."""
 
 @dataclass(frozen=True)
 class DisturbanceNoise:
-    """Process noise of a Kalman filter on the joint where the model is least sure
-    (``--set lmpc_estimator.KEY=VALUE`` for ``inverse-lmpc``).
+    """Process noise of a Kalman filter on the joint where the model is least sure.
+
+    Set by ``--set lmpc_estimator.KEY=VALUE`` for ``inverse-lmpc``.
 
     The filter estimates the joint's states and an unknown torque ``d``. If it trusts the
     model's velocity dynamics and lets ``d`` move fast, an inertia or gain error in the
@@ -76,12 +77,14 @@ class DisturbanceNoise:
 
 @dataclass(frozen=True)
 class EstimatorNoise(DisturbanceNoise):
-    """The NMPC's EKF (``--set estimator.KEY=VALUE``): :class:`DisturbanceNoise` plus three
-    model errors it learns (:data:`~hystmpc.plants.pam_joint.ESTIMATES`), each a random walk
-    of a relative error. Learning the torque gain removes the slow tracking error a wrong
-    a0 or stiffness leaves on a sine; learning the pressure loop's ωp and ζp removes the
-    ringing after steps on a joint whose valve loop is less damped than the model's
-    (docs/pam.md, "Robustness")."""
+    """The NMPC's EKF (``--set estimator.KEY=VALUE``).
+
+    :class:`DisturbanceNoise` plus three model errors it learns
+    (:data:`~hystmpc.plants.pam_joint.ESTIMATES`), each a random walk of a relative error.
+    Learning the torque gain removes the slow tracking error a wrong a0 or stiffness leaves on a
+    sine; learning the pressure loop's ωp and ζp removes the ringing after steps on a joint whose
+    valve loop is less damped than the model's (docs/pam.md, "Robustness").
+    """
 
     gain: float = 1e-6
     """Variance per sample of the relative error of the muscles' torque per bar (0: not
@@ -141,10 +144,13 @@ def build_nmpc(config: dict) -> NmpcController:
 
 
 def build_inverse_lmpc(config: dict) -> InverseLinearMpc:
-    """``inverse-lmpc``: the Maxwell-slip compensation of ``pi-hc`` plus the static balance
-    (eq. (2)) beyond its slope at 0, both from the measured angle, and a linear MPC on the
-    joint linearised at 0 with the NMPC's horizon, bounds and preview, and a Kalman filter
-    with the NMPC's disturbance model (its own noise, group ``lmpc_estimator``)."""
+    """``inverse-lmpc``: a compensation from the measured angle and a linear MPC on the joint.
+
+    The compensation is the Maxwell-slip compensation of ``pi-hc`` plus the static balance
+    (eq. (2)) beyond its slope at 0, both from the measured angle; the linear MPC is on the joint
+    linearised at 0, with the NMPC's horizon, bounds and preview, and a Kalman filter with the
+    NMPC's disturbance model (its own noise, group ``lmpc_estimator``).
+    """
     model: PamJointParams = config["model"]
     hysteresis = HysteresisCompensation(model.hysteresis)
 

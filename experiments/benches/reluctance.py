@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hystmpc.experiments.baselines import InverseCompensation
+from hystmpc.experiments.baselines import HystInverse, InverseCompensation, PolyInverse
 from hystmpc.experiments.bench import MULTIPLE_SHOOTING, Bench, ControllerSpec
 from hystmpc.experiments.runner import Scenario
 from hystmpc.experiments.signals import smooth_path, staircase
@@ -116,8 +116,11 @@ def identified_model(config) -> ReluctanceModel:
 
 
 def measured_loops(path) -> dict[float, tuple[np.ndarray, np.ndarray]]:
-    """Major loops from a measured file: columns ``t``, ``u`` (current, A), ``y`` (force, N) and
-    ``gap_mm``; one 0 → max → 0 run per air gap (Fig. 9). ``ValueError`` naming what is wrong."""
+    """Major loops from a measured file: one 0 → max → 0 run per air gap (Fig. 9).
+
+    Columns ``t``, ``u`` (current, A), ``y`` (force, N) and ``gap_mm``. ``ValueError`` naming
+    what is wrong.
+    """
     from hystmpc.experiments.reference import read_columns
     data = read_columns(path, ("t", "u", "y", "gap_mm"), "loop file", minimum_rows=20)
     loops = {}
@@ -132,8 +135,10 @@ def measured_loops(path) -> dict[float, tuple[np.ndarray, np.ndarray]]:
 
 
 def identified_document(config, loops: dict | None = None) -> dict:
-    """The identified model of the configured core as a JSON-ready dict (``hystmpc identify``):
-    from the simulated experiment, or from measured ``loops`` (:func:`measured_loops`)."""
+    """The identified model of the configured core as a JSON-ready dict (``hystmpc identify``).
+
+    It comes from the simulated experiment, or from measured ``loops`` (:func:`measured_loops`).
+    """
     plant, _, force_max = rig(config)
     if loops is None:
         model = identified_model(config)
@@ -150,60 +155,6 @@ def identified_document(config, loops: dict | None = None) -> dict:
         "poly_inverse": {"features": "sqrt(F)^a * (g/1mm)^b, a+b<=4, a outer", "coefficients": model.poly.tolist()},
         "force_max_N": force_max,
     }
-
-
-class PolyInverse:
-    """Feed-forward through the single-valued polynomial (the paper's baseline, Fig. 5b).
-
-    Like every feed-forward here it commands the force wanted when the current takes
-    effect, one sample ahead (``horizon = 1``); otherwise it would lag by one sample."""
-
-    horizon = 1
-
-    def __init__(self, model: ReluctanceModel, gap: float, current_limit: float):
-        self.model, self.gap, self.limit = model, gap, current_limit
-        self.predicted_output = float("nan")
-
-    def reset(self) -> None:
-        """Stateless."""
-
-    def step(self, measurement, ref_window) -> float:
-        """Current for the reference force."""
-        return float(np.clip(self.model.poly_current(float(ref_window[1]), self.gap)[0], 0.0, self.limit))
-
-    def stats(self) -> None:
-        return None
-
-
-class HystInverse:
-    """i = IH[Lut(F_ref, g)] (eq. (12a)); the command is rate-limited to the slew limit and the
-    operator's memory follows the current actually commanded. Targets the next sample's
-    reference (``horizon = 1``), as :class:`PolyInverse`."""
-
-    horizon = 1
-
-    def __init__(self, model: ReluctanceModel, gap: float, current_limit: float, slew_per_sample: float):
-        self.model, self.gap, self.limit, self.slew = model, gap, current_limit, slew_per_sample
-        self.op = model.operator(gap)
-        self.reset()
-
-    def reset(self) -> None:
-        """Demagnetised at zero current."""
-        self._state = self.op.initial_state(0.0)
-        self.predicted_output = float("nan")
-
-    def step(self, measurement, ref_window) -> float:
-        """Current for the reference force."""
-        x_target = float(self.model.x_of_force(max(float(ref_window[1]), 0.0), self.gap))
-        last = float(self._state[0])
-        _, wanted = self.op.inverse_step(self._state, x_target)
-        current = float(np.clip(wanted, max(0.0, last - self.slew), min(self.limit, last + self.slew)))
-        self._state, x = self.op.step(self._state, current)
-        self.predicted_output = float(self.model.force_of_x(x, self.gap))
-        return current
-
-    def stats(self) -> None:
-        return None
 
 
 def build(kind: str, config: dict):

@@ -11,7 +11,7 @@ from hystmpc.plants.dea import DeaParams
 
 
 @dataclass(frozen=True)
-class LinearMpcSettings:
+class DeaLinearMpcSettings:
     """Linear MPC of Section 5.2 (``--set linear_mpc.KEY=VALUE``)."""
 
     prediction: int = 15
@@ -28,7 +28,7 @@ class LinearMpcSettings:
                 raise ValueError(f"{name} must be finite and >= 0, got {getattr(self, name)}")
 
 
-class LinearMpc:
+class DeaLinearMpc:
     """Linear MPC with OSQP (Section 5.2): the paper's horizons and weights, u ∈ [0, 10] V.
 
     Model: the nominal mechanics linearised at ``x1 = 1.5 mm`` (mid-range), driven by
@@ -39,7 +39,7 @@ class LinearMpc:
     held after the control horizon; the reference over the prediction horizon is previewed.
     """
 
-    def __init__(self, settings: LinearMpcSettings, model: DeaParams):
+    def __init__(self, settings: DeaLinearMpcSettings, model: DeaParams):
         import osqp
         from scipy import sparse
         from scipy.linalg import expm

@@ -1,5 +1,7 @@
-"""wang2025's adaptive backstepping (Section 3.1), with and without the paper's compensation
-(``bic``: creep inverse and implicit inverse through an adaptive KP density)."""
+"""wang2025's adaptive backstepping (Section 3.1), with and without the paper's compensation.
+
+The compensation is ``bic``: creep inverse and implicit inverse through an adaptive KP density.
+"""
 
 from __future__ import annotations
 
@@ -57,9 +59,11 @@ class ReferenceDerivatives:
         self.reset()
 
     def reset(self) -> None:
+        """Forget the last reference."""
         self._last = None
 
     def __call__(self, ref_window) -> tuple[float, float, float]:
+        """The reference and its first two derivatives now (central differences)."""
         r0, r1 = float(ref_window[0]), float(ref_window[1])
         rm = r0 if self._last is None else self._last
         self._last = r0
@@ -74,9 +78,11 @@ class VelocityFilter:
         self.reset()
 
     def reset(self) -> None:
+        """Forget the last measurement; the velocity starts at zero."""
         self._last, self.value = None, 0.0
 
     def __call__(self, y: float) -> float:
+        """The filtered velocity after measurement ``y``."""
         if self._last is not None:
             self.value += self.alpha * ((y - self._last) / self.dt - self.value)
         self._last = y
@@ -169,4 +175,5 @@ class Backstepping:
         return u
 
     def stats(self) -> None:
+        """None: nothing is solved."""
         return None

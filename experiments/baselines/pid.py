@@ -1,0 +1,191 @@
+"""PID on the tracking error, alone or behind an inverse feed-forward.
+
+This is the usual scheme for an actuator with hysteresis (zhou2024 Fig. 14).
+
+* :class:`PidController`: PID on the tracking error, optionally plus a feed-forward term;
+* :class:`InverseFeedforward`: the inverse hysteresis model turns the reference into an input;
+* :func:`inverse_feedforward_pid` puts the two together for any model that has an inverse.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from hystmpc.models.base import HysteresisModel
+
+
+@dataclass(frozen=True)
+class PidGains:
+    """PID gains on the tracking error (units: input per output unit, per second...)."""
+
+    kp: float = 0.0
+    """Proportional gain."""
+    ki: float = 0.0
+    """Integral gain (per second)."""
+    kd: float = 0.0
+    """Derivative gain (seconds), on the filtered error derivative."""
+    derivative_filter: float = 0.02
+    """Time constant of the first-order filter on the derivative (s)."""
+
+    def __post_init__(self):
+        for name in ("kp", "ki", "kd", "derivative_filter"):
+            if not (np.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
+                raise ValueError(f"{name} must be finite and >= 0, got {getattr(self, name)}")
+
+
+class Pid:
+    """Discrete PID with clamping anti-windup and an additive feed-forward term.
+
+    ``u = clip(ff + kp e + I + kd ė_f, lo, hi)``, and within ``rate`` of the last output; the
+    integral only accumulates while that does not push a saturated output further into
+    saturation.
+    """
+
+    def __init__(self, gains: PidGains, dt: float, limits: tuple[float, float], rate: float = np.inf):
+        self.gains = gains
+        self.dt = dt
+        self.lo, self.hi = limits
+        self.rate = rate
+        self.reset()
+
+    def reset(self) -> None:
+        """Clear the integrator and the derivative filter."""
+        self._integral = 0.0
+        self._last_error = None
+        self._derivative = 0.0
+        self._last_output = None
+
+    def update(self, error: float, feedforward: float = 0.0) -> float:
+        """Output for this sample's error."""
+        g = self.gains
+        if self._last_error is not None and g.kd > 0:
+            raw = (error - self._last_error) / self.dt
+            alpha = self.dt / (g.derivative_filter + self.dt)
+            self._derivative += alpha * (raw - self._derivative)
+        self._last_error = error
+        integral = self._integral + g.ki * error * self.dt
+        u = feedforward + g.kp * error + integral + g.kd * self._derivative
+        lo, hi = self.lo, self.hi
+        if self._last_output is not None and np.isfinite(self.rate):
+            lo, hi = max(lo, self._last_output - self.rate), min(hi, self._last_output + self.rate)
+        if lo <= u <= hi or np.sign(error) != np.sign(u - 0.5 * (lo + hi)):
+            self._integral = integral
+        self._last_output = float(np.clip(feedforward + g.kp * error + self._integral + g.kd * self._derivative,
+                                          lo, hi))
+        return self._last_output
+
+
+class Feedforward(Protocol):
+    """A feed-forward term: ``reset()``, then one value per sample."""
+
+    def reset(self) -> None:
+        """Back to the state before the first sample."""
+
+    def __call__(self, measurement, ref_window) -> float:
+        """The feed-forward value for this sample."""
+
+
+class PidController:
+    """PID on ``reference − measured output``, plus an optional feed-forward term.
+
+    Parameters
+    ----------
+    gains : PidGains
+        The gains.
+    sample_period : float
+        Sample period (s).
+    limits : tuple of float
+        The input's bounds; the output is clipped there (with anti-windup).
+    feedforward : Feedforward, optional
+        Added to the PID output before the clip.
+    rate : float
+        Largest input change per sample (default: none).
+    """
+
+    horizon = 0
+
+    def __init__(self, gains: PidGains, sample_period: float, limits: tuple[float, float],
+                 feedforward: Feedforward | None = None, rate: float = np.inf):
+        self.pid = Pid(gains, sample_period, limits, rate)
+        self.feedforward = feedforward
+        self.reset()
+
+    def reset(self) -> None:
+        """Clear the PID and the feed-forward's memory."""
+        self.pid.reset()
+        if self.feedforward is not None:
+            self.feedforward.reset()
+        self.predicted_output = float("nan")
+
+    def step(self, measurement, ref_window) -> float:
+        """Input for this sample."""
+        ff = 0.0 if self.feedforward is None else self.feedforward(measurement, ref_window)
+        return self.pid.update(float(ref_window[0]) - measurement.y, ff)
+
+    def stats(self) -> None:
+        """None: nothing is solved."""
+        return None
+
+
+class InverseFeedforward:
+    """The input that the inverse hysteresis model gives for the reference.
+
+    ``h = steady_input(r)`` is the hysteresis output that holds the output at ``r`` at rest
+    (default: ``r`` itself), ``v = hysteresis.inverse_step(h)`` the hysteresis input and
+    ``u = input_of(v)`` the actuator input (default: ``v``). The inverse model's memory
+    follows its own inputs; a target the model cannot reach holds the last input.
+
+    Parameters
+    ----------
+    hysteresis : HysteresisModel
+        The nominal hysteresis model.
+    steady_input, input_of : callable, optional
+        See above.
+    preview : int
+        Target the reference this many samples ahead (a known dead time).
+    """
+
+    def __init__(self, hysteresis: HysteresisModel, steady_input: Callable | None = None,
+                 input_of: Callable | None = None, preview: int = 0):
+        self.hysteresis, self.steady_input, self.input_of, self.preview = hysteresis, steady_input, input_of, preview
+        self.reset()
+
+    def reset(self) -> None:
+        """The inverse model at rest."""
+        self._state = self.hysteresis.initial_state()
+        self._last = None
+
+    def __call__(self, measurement, ref_window) -> float:
+        """The inverse model's input for the reference ``preview`` samples ahead."""
+        r = float(ref_window[min(self.preview, len(ref_window) - 1)])
+        target = r if self.steady_input is None else float(self.steady_input(r))
+        try:
+            self._state, v = self.hysteresis.inverse_step(self._state, target)
+        except ValueError:  # beyond the model's reach: hold (the PID does the rest)
+            if self._last is None:
+                raise
+            return self._last
+        self._last = float(v if self.input_of is None else self.input_of(v))
+        return self._last
+
+
+
+
+def inverse_feedforward_pid(hysteresis: HysteresisModel, gains: PidGains, sample_period: float,
+                            limits: tuple[float, float], steady_input: Callable | None = None,
+                            input_of: Callable | None = None, preview: int = 0, rate: float = np.inf
+                            ) -> PidController:
+    """Inverse feed-forward + PID (the usual scheme for an actuator with hysteresis).
+
+    See :class:`InverseFeedforward` for ``steady_input``, ``input_of`` and ``preview``; the
+    controller asks for ``preview`` samples of reference preview.
+    """
+    controller = PidController(gains, sample_period, limits,
+                               InverseFeedforward(hysteresis, steady_input, input_of, preview), rate)
+    controller.horizon = preview
+    return controller
+
