@@ -63,6 +63,7 @@ def test_codegen_verify_over_the_whole_default_scenario(tmp_path, bench_name):
     assert verify["max_input_difference"] <= 1e-9
     assert verify["example_loop"]["max_input_difference"] <= 1e-9
     if bench_name in ("pam", "reluctance"):  # DAQP: the firmware's build (its sources, the static arena)
+        assert verify["example_loop"]["static_qp"] == "DAQP 0.5.1 sources"
         assert verify["example_loop"]["static_qp_max_input_difference"] <= 1e-9
     assert verify["failures"]["c"] == verify["failures"]["python"]
     name = controller["name"]
@@ -109,6 +110,30 @@ def test_a_microcontroller_build_keeps_the_exact_widths_when_told(tmp_path):
     report = json.loads(out.read_text())["controller"]
     assert report["sensitivity_block"] == 0
     assert report["cortex-m7"]["bss"] > 64 * 1024  # why a microcontroller build pads by default
+
+
+@pytest.mark.slow
+def test_codegen_verify_needs_no_network_and_a_wrong_daqp_folder_is_an_error(tmp_path, monkeypatch, capsys):
+    """Without DAQP's sources (offline, none cached) the static-arena check links CasADi's DAQP
+    library with its allocator renamed, and gives the same inputs; a wrong
+    ``HYSTMPC_DAQP_SOURCES`` is exit 2 naming it, not a quiet fallback."""
+    from hystmpc.mpc.codegen import firmware
+
+    def offline():
+        raise firmware.DaqpSourcesMissing("no network (test)")
+
+    monkeypatch.setattr(firmware, "daqp_sources", offline)
+    out = tmp_path / "report.json"
+    assert main(["codegen", "pam", "--verify", "--duration", "0.5", "--out", str(tmp_path / "c"), "--json",
+                 str(out), "--quiet"]) == 0
+    loop = json.loads(out.read_text())["controller"]["verify"]["example_loop"]
+    assert loop["static_qp"] == "CasADi's DAQP library"
+    assert loop["static_qp_max_input_difference"] <= 1e-9
+    monkeypatch.undo()
+    monkeypatch.setenv("HYSTMPC_DAQP_SOURCES", str(tmp_path / "nowhere"))
+    capsys.readouterr()
+    assert main(["codegen", "pam", "--verify", "--duration", "0.5", "--out", str(tmp_path / "d"), "--quiet"]) == 2
+    assert "HYSTMPC_DAQP_SOURCES=" in capsys.readouterr().err
 
 
 def test_codegen_refuses_an_unknown_target_and_a_target_without_a_controller(tmp_path, capsys):

@@ -106,8 +106,9 @@ def c_name(name: str) -> str:
 
 def write_controller(code: ControllerCode, out: Path, name: str, signals: Signals, sample_period: float,
                      origin: str, version: str, build: bool = True) -> dict:
-    """Write the controller's C files into ``out`` and build them (shared library and example
-    loop). Returns what was written: names, sizes, the memory layout.
+    """Write the controller's C files into ``out`` and build them (shared library and example loop).
+
+    Returns what was written: names, sizes, the memory layout.
 
     Parameters
     ----------
@@ -197,8 +198,10 @@ def _extra_step_doc(tolerance: float) -> str:
 
 def build_controller_library(out: Path, name: str, include: list[str], libraries: list[str],
                              example: bool = True) -> None:
-    """Build ``lib<name>.so`` (and, with ``example``, ``<name>_main``) in ``out`` with the system
-    compiler; ``RuntimeError`` when there is none or the build fails."""
+    """Build ``lib<name>.so`` (and, with ``example``, ``<name>_main``) in ``out``.
+
+    Uses the system compiler; ``RuntimeError`` when there is none or the build fails.
+    """
     cc = c_compiler()
     if cc is None:
         raise RuntimeError("no C compiler (cc, or CC) on the PATH to build the controller")
@@ -218,9 +221,11 @@ STALE_BUILD_S = 3600.0
 
 
 def build_cached(written: Path, name: str, root: Path, reason: str) -> Path:
-    """``lib<name>.so`` of the controller written in ``written``, built once per distinct source
-    (hashed with the compiler, its flags and the QP library's) into ``root/<hash>`` by an atomic
-    rename; ``reason`` says why, on the log, when it is built."""
+    """``lib<name>.so`` of the controller written in ``written``, built once per distinct source.
+
+    The source is hashed with the compiler, its flags and the QP library's, and built into
+    ``root/<hash>`` by an atomic rename; ``reason`` says why, on the log, when it is built.
+    """
     cc = c_compiler()
     include, libraries = library_flags((written / f"{name}_nmpc.c").read_text())
     digest = hashlib.sha256(" ".join([*cc, *COMPILE_FLAGS, *include, *libraries]).encode())
@@ -323,8 +328,11 @@ class CompiledController:
         return float(self._predicted(self._ctrl))
 
     def stats(self) -> dict:
-        """Failures and estimator restarts counted in C (each failure a fallback) and the
-        statuses seen (no iteration counts: the RTI steps per sample are fixed)."""
+        """Failures and estimator restarts counted in C, and the statuses seen.
+
+        Each failure is a fallback; there are no iteration counts (the RTI steps per sample
+        are fixed).
+        """
         failures = int(self._failures(self._ctrl))
         return {"name": "generated C", "failures": failures, "fallbacks": failures,
                 "estimator_resets": int(self._resets(self._ctrl)),

@@ -1,6 +1,7 @@
-"""Generated controllers built as firmware: cross-compiled for a Cortex-M7 and sized, and
-DAQP's own C sources compiled on a static arena (the firmware's QP, checked on this machine
-too by :func:`static_qp_loop`).
+"""Generated controllers built as firmware: cross-compiled for a Cortex-M7 and sized.
+
+DAQP's own C sources are compiled on a static arena (the firmware's QP, checked on this
+machine too by :func:`static_qp_loop`).
 
 DAQP allocates its workspace in each solve; the firmware compiles DAQP's sources with their
 ``malloc``, ``calloc`` and ``free`` taken from ``<name>_qp_arena.c`` (:func:`daqp_arena_doubles`
@@ -29,10 +30,12 @@ headers are 0.5.1's), so the firmware's QP computes what the host build's does."
 
 
 def daqp_arena_doubles(n: int, m: int, ms: int) -> int:
-    """Doubles DAQP 0.5.1 allocates in one solve of a dense QP with ``n`` variables and ``m``
-    constraints, ``ms`` of them simple bounds (no binaries, no soft constraints), each block
-    rounded up to whole doubles: the workspace (``allocate_daqp_workspace``) and the LDP
-    (``setup_daqp_ldp`` with H and f given)."""
+    """Doubles DAQP 0.5.1 allocates in one solve of a dense QP.
+
+    The QP has ``n`` variables and ``m`` constraints, ``ms`` of them simple bounds (no
+    binaries, no soft constraints); each block is rounded up to whole doubles: the workspace
+    (``allocate_daqp_workspace``) and the LDP (``setup_daqp_ldp`` with H and f given).
+    """
     def ints(k: int) -> int:
         return (4 * k + 7) // 8
     workspace = 5 * (n + 1) + ints(n + 1) + (n + 1) * (n + 2) // 2 + 2 * n
@@ -45,9 +48,11 @@ class DaqpSourcesMissing(RuntimeError):
 
 
 def daqp_sources() -> Path:
-    """DAQP's C sources (``include/`` and ``src/``) for a firmware build: the folder
-    ``$HYSTMPC_DAQP_SOURCES`` names, else the hystmpc cache, else downloaded once into the cache
-    from PyPI (the sdist of :data:`DAQP_VERSION`, with pip, so pip's own index settings apply).
+    """DAQP's C sources (``include/`` and ``src/``) for a firmware build.
+
+    From the folder ``$HYSTMPC_DAQP_SOURCES`` names, else the hystmpc cache, else downloaded
+    once into the cache from PyPI (the sdist of :data:`DAQP_VERSION`, with pip, so pip's own
+    index settings apply).
 
     Raises :class:`DaqpSourcesMissing` when none of these has them.
     """
@@ -55,10 +60,10 @@ def daqp_sources() -> Path:
     import tempfile
 
     given = os.environ.get("HYSTMPC_DAQP_SOURCES")
-    if given:
-        if not ((Path(given) / "src").is_dir() and (Path(given) / "include").is_dir()):
-            raise DaqpSourcesMissing(f"HYSTMPC_DAQP_SOURCES={given!r} has no include/ and src/ folders (DAQP "
-                                     f"{DAQP_VERSION}'s csrc/include and csrc/src)")
+    if given:  # a folder named on purpose: a wrong one is an error, never a silent fallback
+        if not ((Path(given) / "src").is_dir() and (Path(given) / "include" / "api.h").is_file()):
+            raise ValueError(f"HYSTMPC_DAQP_SOURCES={given!r} has no include/api.h and src/ (DAQP "
+                             f"{DAQP_VERSION}'s csrc/include and csrc/src folders)")
         return Path(given)
     target = cache_dir() / f"daqp-{DAQP_VERSION}"
     if (target / "src").is_dir() and (target / "include").is_dir():
@@ -85,8 +90,10 @@ def daqp_sources() -> Path:
 
 
 def cross_compile(out: Path, name: str, compiler: str = "arm-none-eabi-gcc") -> dict:
-    """Build the generated controller in ``out`` for a Cortex-M7 (:data:`CORTEX_M7_FLAGS`, newlib
-    without system calls, libm) around the firmware loop template (``templates/firmware.c.in``), and measure it.
+    """Build the generated controller in ``out`` for a Cortex-M7 and measure it.
+
+    The build uses :data:`CORTEX_M7_FLAGS`, newlib without system calls and libm, around the
+    firmware loop template (``templates/firmware.c.in``).
 
     Returns the ELF's ``text``, ``data`` and ``bss`` in bytes (``arm-none-eabi-size``), the
     flags, and the QP (DAQP's sources are compiled in where the step uses DAQP). Raises
@@ -122,9 +129,11 @@ def cross_compile(out: Path, name: str, compiler: str = "arm-none-eabi-gcc") -> 
 
 
 def daqp_on_arena(cc: list[str], flags: list[str], name: str, build: Path) -> tuple[list[str], list[str]]:
-    """Compile DAQP's sources into ``build`` with ``cc`` and ``flags``, their malloc, calloc and
-    free taken from ``<name>_qp_arena.c``; returns the include flags for DAQP's headers and the
-    object files."""
+    """Compile DAQP's sources into ``build`` with ``cc`` and ``flags``, on the static arena.
+
+    Their malloc, calloc and free are taken from ``<name>_qp_arena.c``; returns the include
+    flags for DAQP's headers and the object files.
+    """
     daqp = daqp_sources()
     headers = build / "include"
     shutil.copytree(daqp / "include", headers / "daqp", dirs_exist_ok=True)
@@ -138,9 +147,11 @@ def daqp_on_arena(cc: list[str], flags: list[str], name: str, build: Path) -> tu
 
 
 def casadi_daqp_on_arena(name: str, build: Path) -> tuple[list[str], list[str]]:
-    """CasADi's static DAQP library with its malloc, calloc and free renamed to the arena's
-    (``objcopy --redefine-sym``, what ``-D`` does to the sources), for a check on this machine
-    without DAQP's sources; returns the include flags and the renamed library."""
+    """CasADi's static DAQP library with its malloc, calloc and free renamed to the arena's.
+
+    The renaming is ``objcopy --redefine-sym``, what ``-D`` does to the sources, for a check
+    on this machine without DAQP's sources; returns the include flags and the renamed library.
+    """
     include, libraries = library_flags("#include <daqp/")
     objcopy = shutil.which("objcopy")
     if not (len(libraries) == 1 and libraries[0].endswith(".a") and objcopy):
@@ -149,14 +160,22 @@ def casadi_daqp_on_arena(name: str, build: Path) -> tuple[list[str], list[str]]:
     renamed = build / "libdaqp_arena.a"
     run([objcopy, *(f"--redefine-sym={f}={name}_qp_{f}" for f in ("malloc", "calloc", "free")), libraries[0],
          str(renamed)], "renaming DAQP's allocator")
+    nm = shutil.which("nm")
+    left = set(subprocess.run([nm, "-u", str(renamed)], capture_output=True, text=True).stdout.split()) if nm else {""}
+    if not nm or left & {"malloc", "calloc", "free", "realloc"}:
+        raise DaqpSourcesMissing("CasADi's DAQP library still calls the system allocator after renaming (or nm is "
+                                 "missing): its static-arena check needs DAQP's sources")
     return include, [str(renamed)]
 
 
 def static_qp_loop(out: Path, name: str, recording: Path) -> tuple[np.ndarray, str]:
-    """The example loop built as the firmware is (DAQP's own sources, their malloc from
-    ``<name>_qp_arena.c``) for this machine, run on ``recording``; returns its inputs and which
-    DAQP it linked. Without DAQP's sources (offline, none cached) it links CasADi's DAQP
-    library on the same arena instead (:func:`casadi_daqp_on_arena`), after a notice."""
+    """The example loop built as the firmware is, for this machine, run on ``recording``.
+
+    As the firmware: DAQP's own sources, their malloc from ``<name>_qp_arena.c``. Returns its
+    inputs and which DAQP it linked. Without DAQP's sources (offline, none cached) it links
+    CasADi's DAQP library on the same arena instead (:func:`casadi_daqp_on_arena`), after a
+    notice.
+    """
     cc = c_compiler()
     build = out / "static-qp"
     build.mkdir(exist_ok=True)

@@ -1,5 +1,8 @@
-"""One CasADi Function (the RTI step) as C with a standalone replay program: ``rti_step.c/.h``,
-``main.c`` (replays recorded solver inputs without Python and times them) and a Makefile."""
+"""One CasADi Function (the RTI step) as C with a standalone replay program.
+
+The files: ``rti_step.c/.h``, ``main.c`` (replays recorded solver inputs without Python and
+times them) and a Makefile.
+"""
 
 from __future__ import annotations
 
@@ -29,14 +32,17 @@ class RecordingStep:
         self.calls: list[np.ndarray] = []
 
     def __call__(self, w0, p):
+        """Record ``(w0, p)`` and call the step."""
         self.calls.append(np.concatenate((np.ravel(w0), np.ravel(p))))
         return self.fun(w0, p)
 
 
 def write_step(step: ca.Function, out: Path) -> ca.Function:
-    """Write ``step`` (named ``rti_step``) as C, with a header, ``main.c`` and a Makefile, into
-    ``out``; build the shared library and the replay program, and return the compiled step
-    loaded back. ``RuntimeError`` when there is no C compiler or the build fails."""
+    """Write ``step`` (named ``rti_step``) as C into ``out``, build it, and load it back.
+
+    Writes a header, ``main.c`` and a Makefile too; builds the shared library and the replay
+    program. ``RuntimeError`` when there is no C compiler or the build fails.
+    """
     out.mkdir(parents=True, exist_ok=True)
     gen = ca.CodeGenerator("rti_step.c", {"with_header": True})
     gen.add(step)

@@ -1,5 +1,6 @@
-"""The C toolchain: the compiler, its flags, the build cache, and the templates of the files
-hystmpc writes around generated code.
+"""The C toolchain: the compiler, its flags, the build cache, and the templates.
+
+The templates are the files hystmpc writes around generated code.
 
 :func:`compile_function` generates C for one CasADi Function, compiles it once per distinct
 source (cached under :func:`cache_dir`) and loads it back: the ``rti-c`` solver and the
@@ -24,14 +25,15 @@ import casadi as ca
 
 
 def cache_dir() -> Path:
-    """Where compiled solvers and controllers are kept: ``$HYSTMPC_CACHE`` (compiled code
-    only), else :func:`user_cache_dir`."""
+    """Where compiled solvers and controllers are kept.
+
+    ``$HYSTMPC_CACHE`` (compiled code only), else :func:`user_cache_dir`.
+    """
     return Path(os.environ.get("HYSTMPC_CACHE") or user_cache_dir())
 
 
 def user_cache_dir() -> Path:
-    """hystmpc's cache: ``$HYSTMPC_CACHE_DIR``, else ``$XDG_CACHE_HOME/hystmpc``
-    (``~/.cache/hystmpc``)."""
+    """Hystmpc's cache: ``$HYSTMPC_CACHE_DIR``, else ``$XDG_CACHE_HOME/hystmpc`` (``~/.cache/hystmpc``)."""
     if os.environ.get("HYSTMPC_CACHE_DIR"):
         return Path(os.environ["HYSTMPC_CACHE_DIR"])
     return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "hystmpc"
@@ -46,8 +48,10 @@ LOG = logging.getLogger("hystmpc")
 
 
 def c_compiler() -> list[str] | None:
-    """The system C compiler as a command (``CC``, which may carry a launcher or options
-    such as ``ccache gcc``, or ``cc``) if its program is on the PATH, else None."""
+    """The system C compiler as a command if its program is on the PATH, else None.
+
+    ``CC`` (which may carry a launcher or options such as ``ccache gcc``), or ``cc``.
+    """
     try:
         words = shlex.split(os.environ.get("CC", "")) or ["cc"]
     except ValueError:  # an unbalanced quote: no command to run
@@ -99,8 +103,11 @@ def compile_function(fun: ca.Function, out_dir: Path | None = None, flags=COMPIL
 
 
 def library_flags(source: str) -> tuple[list[str], list[str]]:
-    """``(include flags, libraries)`` that generated C needs beyond libm: DAQP's headers and
-    static library from the CasADi package when the source calls DAQP, else nothing."""
+    """``(include flags, libraries)`` that generated C needs beyond libm.
+
+    DAQP's headers and static library from the CasADi package when the source calls DAQP,
+    else nothing.
+    """
     if "#include <daqp/" not in source:
         return [], []
     casadi_dir = Path(ca.__file__).parent
@@ -115,9 +122,11 @@ class CompilerNotFound(RuntimeError):
 
 
 def compiled_or_slower(fun: ca.Function, notice: str, flags=COMPILE_FLAGS) -> ca.Function:
-    """``fun`` compiled (cached; the same numbers to the last bit), or ``fun`` itself after a
-    one-line notice, ``<why>: <notice>``, where it cannot be (no compiler, one that fails,
-    a cache it cannot write)."""
+    """``fun`` compiled (cached; the same numbers to the last bit), or ``fun`` itself.
+
+    Where it cannot be compiled (no compiler, one that fails, a cache it cannot write), a
+    one-line notice says ``<why>: <notice>``.
+    """
     try:
         return compile_function(fun, flags=flags)
     except (RuntimeError, OSError) as exc:
@@ -126,8 +135,10 @@ def compiled_or_slower(fun: ca.Function, notice: str, flags=COMPILE_FLAGS) -> ca
 
 
 def compiled_or_in_process(fun: ca.Function) -> tuple[ca.Function, bool]:
-    """``(fun compiled, True)``, or ``(fun, False)`` with a one-line notice when there is no C
-    compiler: ``rti-c`` then runs the same step in-process, as ``rti``."""
+    """``(fun compiled, True)``, or ``(fun, False)`` with a one-line notice without a compiler.
+
+    Without a C compiler, ``rti-c`` runs the same step in-process, as ``rti``.
+    """
     try:
         return compile_function(fun), True
     except CompilerNotFound as exc:
@@ -136,14 +147,16 @@ def compiled_or_in_process(fun: ca.Function) -> tuple[ca.Function, bool]:
 
 
 def accept_last_qp_iterate(source: str) -> str:
-    """Make generated QP calls return their last iterate when they stop short, as the
-    in-process solvers do with ``error_on_fail: False`` (CasADi's C output ignores that option
-    and makes the whole call fail). The RTI step is then the same function in C and in
+    """Make generated QP calls return their last iterate when they stop short.
+
+    The in-process solvers do so with ``error_on_fail: False``; CasADi's C output ignores that
+    option and makes the whole call fail. The RTI step is then the same function in C and in
     Python, and a failed QP is counted by ``qp_error`` instead of aborting the step.
 
     qrqp: every status returns 0. DAQP: the step goes on whatever DAQP's exit, and when its
     setup fails (an H that is not positive definite) the answer is NaN, so ``qp_error`` is
-    infinite."""
+    infinite.
+    """
     patched = source
     if "casadi_qrqp" in source:
         failing = "  } else if (d.status == QP_NO_SEARCH_DIR) {\n    return 4;\n  } else {\n    return -1;\n  }"
@@ -171,8 +184,8 @@ def no_compiler_reason() -> str:
     return f"CC={os.environ['CC']!r} is not an executable" if os.environ.get("CC") else "no cc on the PATH"
 
 
-def run(cmd: list[str], what: str, cwd: Path | None = None) -> None:
+def run(cmd: list[str], what: str) -> None:
     """Run a build command; ``RuntimeError`` naming ``what`` with the end of its message on failure."""
-    done = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True)
+    done = subprocess.run(cmd, capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f"{what} failed: {done.stderr.strip()[-1500:]}")
