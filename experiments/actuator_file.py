@@ -23,28 +23,32 @@ Groups for ``--set`` (and for optional tables of the same names in the file): ``
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import logging
-import os
 import re
 import tomllib
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from hystmpc.experiments.baselines import InverseCompensation, PidController, PidGains, inverse_feedforward_pid
+from hystmpc.experiments.actuator_groups import ActuatorModel, ActuatorPlant, parameter_class, perturb
+from hystmpc.experiments.baselines import (
+    FeedforwardPidGains,
+    InverseCompensation,
+    PidController,
+    PidGains,
+    inverse_feedforward_pid,
+)
 from hystmpc.experiments.bench import MULTIPLE_SHOOTING, SINGLE_SHOOTING, Bench, ControllerSpec
-from hystmpc.experiments.config import apply_overrides, get_value
+from hystmpc.experiments.config import apply_values
 from hystmpc.experiments.runner import Scenario
+from hystmpc.experiments.tuning import tuned_baselines
 from hystmpc.models.document import dynamics_from, read_model_document
-from hystmpc.models.identification import FAMILIES, build_hysteresis, hysteresis_output
-from hystmpc.models.linear_dynamics import KIND_KEYS, LinearDynamics
+from hystmpc.models.identification import build_hysteresis, hysteresis_output
+from hystmpc.models.linear_dynamics import KIND_KEYS
 from hystmpc.models.prediction import Smoothing, build_prediction_model
 from hystmpc.mpc import InputBounds, NmpcController, NmpcSettings, SolverSettings
-from hystmpc.mpc.codegen import user_cache_dir
 from hystmpc.mpc.linear_mpc import InverseLinearMpc, LinearMpcSettings
 from hystmpc.plants.actuator import BlendedActuator, HysteresisActuator
 
@@ -52,13 +56,6 @@ LOG = logging.getLogger("hystmpc")
 _WARNED: set[str] = set()
 """Warnings already given, once per file and process (the output range beyond the model's
 reach: the path; a linear block above Nyquist: the path with "#nyquist")."""
-TUNING_RULE = "mean-rmse-ensemble-rings-below-3/9"
-"""Names the tuning rule in the cache key: change it when the rule changes."""
-LMPC_RATE_FACTORS = (0.01, 0.1, 1.0, 10.0, 100.0, 1e3, 1e4)
-"""The rate weights ``inverse-lmpc``'s tuning tries, relative to the default (the NMPC's
-normalised rate weight, on the output span instead of the input span)."""
-TUNING_SEED = 1
-"""Sensor-noise seed of the tuning runs (the comparison's default is 0)."""
 GROUP_TABLES = ("nmpc", "smoothing", "solver", "pid", "inverse_ff_pid", "lmpc")
 """Optional tables that set the groups of the same name (as ``--set`` would)."""
 TABLES = {
@@ -72,104 +69,14 @@ KEYS = {"name", "description", "sample_period", "output_name", "units", "input_u
         "input_rate", "output_range", *TABLES, *GROUP_TABLES}
 
 
-@dataclass(frozen=True)
-class FeedforwardPidGains(PidGains):
-    """PID gains and the feed-forward's reference preview (``--set inverse_ff_pid.*``)."""
-
-    preview: int = 0
-    """Samples by which the inverse feed-forward leads the reference (it covers the dead time,
-    the sampling's one sample and the block's lag)."""
-
-    def __post_init__(self):
-        super().__post_init__()
-        if not (isinstance(self.preview, int) and 0 <= self.preview <= 1000):
-            raise ValueError(f"preview must be an integer in [0, 1000], got {self.preview}")
-
-
-@dataclass(frozen=True)
-class ActuatorPlant:
-    """The simulated truth of an actuator file (``--set plant.*``)."""
-
-    mismatch: float = 0.05
-    """Relative perturbation of every model parameter, uniform in ±mismatch (0: the model itself)."""
-    seed: int = 0
-    """Seed of the perturbation."""
-    noise: float = 0.0
-    """Sensor noise standard deviation (output units)."""
-    truth: str = "model"
-    """What is perturbed: ``model`` (the controllers' own model), ``runner-up`` (the model and
-    the second family of an ``identify auto`` ranking in parallel, blended by what the model
-    missed on the validation record), or the path of another model document (relative to
-    the actuator file)."""
-
-    def __post_init__(self):
-        if not (isinstance(self.truth, str) and self.truth.strip()):
-            raise ValueError(f"truth must be runner-up, model or a model document's path, got {self.truth!r}")
-        if not (np.isfinite(self.mismatch) and 0 <= self.mismatch <= 0.5):
-            raise ValueError(f"mismatch must be in [0, 0.5], got {self.mismatch}")
-        if not (np.isfinite(self.noise) and self.noise >= 0):
-            raise ValueError(f"noise must be finite and >= 0, got {self.noise}")
-        if not (isinstance(self.seed, int) and self.seed >= 0):
-            raise ValueError(f"seed must be an integer >= 0, got {self.seed}")
-
-
-@dataclass(frozen=True)
-class ActuatorModel:
-    """What the controllers believe (``--set model.hysteresis.*``, ``model.dynamics.*``)."""
-
-    hysteresis: Any
-    """The family's parameters (a frozen dataclass made from the model document)."""
-    dynamics: LinearDynamics = LinearDynamics()
-    """The linear block after the hysteresis and the dead time."""
-
-
-def _frozen(value):
-    if isinstance(value, list):
-        return tuple(_frozen(v) for v in value)
-    return value
-
-
-def parameter_class(family: str, parameters: dict, sample_period: float):
-    """A frozen dataclass holding ``parameters`` (defaults), validated by building the model."""
-    def check(self):
-        try:
-            build_hysteresis(family, dataclasses.asdict(self), sample_period)
-        except (KeyError, TypeError) as exc:
-            raise ValueError(f"bad {family} parameters: {exc}") from None
-
-    fields = [(name, type(_frozen(value)), dataclasses.field(default=_frozen(value)))
-              for name, value in parameters.items()]
-    cls_name = "".join(part.title() for part in family.split("-")) + "Parameters"
-    return dataclasses.make_dataclass(cls_name, fields, frozen=True, namespace={"__post_init__": check})
-
-
-def _perturbed(value, rng, mismatch: float):
-    if isinstance(value, tuple) and value and isinstance(value[0], tuple):  # points: scale the outputs together
-        factor = 1 + mismatch * rng.uniform(-1, 1)
-        return tuple((p[0], p[1] * factor) for p in value)
-    if isinstance(value, tuple):
-        return tuple(v * (1 + mismatch * rng.uniform(-1, 1)) for v in value)
-    return value * (1 + mismatch * rng.uniform(-1, 1))
-
-
-def perturb(model: ActuatorModel, family: str, mismatch: float, seed: int) -> ActuatorModel:
-    """``model`` with its parameters and time constants perturbed by ±``mismatch``, seeded.
-
-    The perturbed values are the family's parameters (:attr:`Family.mismatch`, polylines' outputs
-    as a whole) and the dynamics' time constants.
-    """
-    rng = np.random.default_rng(seed)
-    names = FAMILIES[family].mismatch + (("ascending", "descending") if family == "power-function" else ())
-    h = dataclasses.replace(model.hysteresis, **{n: _perturbed(getattr(model.hysteresis, n), rng, mismatch)
-                                                  for n in names})
-    dyn = model.dynamics
-    dyn = dataclasses.replace(dyn, **{n: _perturbed(getattr(dyn, n), rng, mismatch)
-                                      for n in ("time_constant", "natural_frequency_hz", "damping")})
-    return ActuatorModel(h, dyn)
-
-
 class ActuatorSpec:
-    """A parsed actuator file; :meth:`bench` makes the :class:`Bench`."""
+    """A parsed actuator file; :meth:`bench` makes the :class:`Bench`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The actuator file (TOML); ``ValueError`` naming the bad key.
+    """
 
     def __init__(self, path: str | Path):
         self.path = Path(path).resolve()
@@ -233,7 +140,7 @@ class ActuatorSpec:
             self.plant = ActuatorPlant(self._number(plant, "mismatch", 0.05, key="plant.mismatch"), seed, self.noise,
                                        plant.get("truth", "model"))
             self.truth(self.plant.truth)
-            if self._runner_up() is not None:  # the tuning ensemble has it whatever the truth
+            if self.runner_up() is not None:  # the tuning ensemble has it whatever the truth
                 self.truth("runner-up")
         except ValueError as exc:
             raise ValueError(f"{where}: [plant] {exc}") from None
@@ -246,9 +153,9 @@ class ActuatorSpec:
         self.duration_s = self._number(scen, "duration_s", 4.5 / self.sine_hz, positive=True,
                                        key="scenarios.duration_s")
         self._warn_beyond_reach()
-        self._table_values = [(f"{group}.{key}", value) for group in GROUP_TABLES
-                              for key, value in _flatten(raw.get(group, {}))]
-        self.overrides = [f"{key}={value}" for key, value in self._table_values]
+        self.table_values = [(f"{group}.{key}", value) for group in GROUP_TABLES
+                             for key, value in _flatten(raw.get(group, {}))]
+        """The file's ``[nmpc]``, ``[solver]``, ... values as ``(key, value)``, with their TOML types."""
         self._tuned: dict = {}
         try:
             self._configured()
@@ -360,7 +267,12 @@ class ActuatorSpec:
         return float(value[0]), float(value[1])
 
     def _default_sine_hz(self) -> float:
-        """A tenth of the block's bandwidth (a 25th of the sample rate without a block)."""
+        """The default sine's frequency, from the linear block's speed.
+
+        A fifteenth of a second-order block's natural frequency or a fifth of a first-order
+        block's corner frequency (at most a 25th of the sample rate); a 100th of the sample rate
+        without a block.
+        """
         d = self.dynamics
         rate = 1.0 / self.sample_period
         if d.kind == "second-order":
@@ -371,11 +283,17 @@ class ActuatorSpec:
 
     # ----- what the bench is built from ------------------------------------------------------------
     def defaults(self) -> dict:
-        """Fresh parameter groups, the file's own tables applied, the PID gains tuned."""
+        """Fresh parameter groups, the file's own tables applied, the PID gains tuned.
+
+        Returns
+        -------
+        dict
+            The parameter groups by name.
+        """
         config = self._configured()
         config |= self.tuned_gains(config)
         # the file's [pid] keys win over the tuned gains
-        return apply_overrides(config, self.overrides, self._unused_keys(), source="table")
+        return apply_values(config, self.table_values, self._unused_keys())
 
     def _configured(self) -> dict:
         """The groups before tuning, the file's tables applied."""
@@ -386,7 +304,6 @@ class ActuatorSpec:
         horizon = int(np.clip(self.dynamics.delay_samples + round(self._settling() / self.sample_period) + 2, 10, 40))
         config = {"plant": self.plant, "model": model,
                   # runtime auto: the generated whole controller in the loop, as it would be flashed
-                  # (piezo example: 0.016 ms per step against 0.26 ms in Python, the same inputs)
                   # multistart: a second RTI plan from the inverse model's inputs each sample, the
                   # cheaper plan kept; it pays where the identified model is off (docs/your-actuator.md)
                   "nmpc": NmpcSettings(horizon=horizon, q_output=(100 / span_y) ** 2,
@@ -397,19 +314,7 @@ class ActuatorSpec:
                   # the NMPC's horizon and weights, the rate weight on the virtual input (output units)
                   "lmpc": LinearMpcSettings(horizon=horizon, q_output=(100 / span_y) ** 2,
                                             r_rate=1e-3 * (100 / span_y) ** 2)}
-        self._check_types(config)
-        return apply_overrides(config, self.overrides, self._unused_keys(), source="table")
-
-    def _check_types(self, config: dict) -> None:
-        """A table value of the wrong TOML type (``horizon = "20"``, ``preview = 1``) is refused, not converted."""
-        for key, value in self._table_values:
-            try:
-                current = get_value(config, key)
-            except ValueError:
-                continue  # an unknown key: apply_overrides names it
-            expected = _kind(current)
-            if expected is not None and not _fits(value, expected):
-                raise ValueError(f"{key} = {value!r}: expected {expected} (the default is {current!r})")
+        return apply_values(config, self.table_values, self._unused_keys())
 
     def _settling(self) -> float:
         d = self.dynamics
@@ -421,17 +326,53 @@ class ActuatorSpec:
         """The model document's parameters (or ``identified``'s) and its offsets.
 
         The offsets come as ``input_offset`` and ``output_offset``.
+
+        Parameters
+        ----------
+        identified : Identified, optional
+            Another identified model (default: the file's).
+
+        Returns
+        -------
+        dict
+            Parameter names and values.
         """
         identified = identified or self.identified
         return {**identified.parameters, "input_offset": identified.offsets["input"],
                 "output_offset": identified.offsets["output"]}
 
     def hysteresis(self, model: ActuatorModel):
-        """``(hysteresis model, creep order)`` of a ``model`` group."""
+        """``(hysteresis model, creep order)`` of a ``model`` group.
+
+        Parameters
+        ----------
+        model : ActuatorModel
+            The ``model`` group (of the file's family).
+
+        Returns
+        -------
+        tuple
+            The exact hysteresis model and its creep order (0 without creep).
+        """
         return build_hysteresis(self.family, dataclasses.asdict(model.hysteresis), self.sample_period)
 
     def plant_of(self, model: ActuatorModel, noise: float, family: str | None = None) -> HysteresisActuator:
-        """The exact model (of the file's family, or ``family``) as a plant."""
+        """The exact model (of the file's family, or ``family``) as a plant.
+
+        Parameters
+        ----------
+        model : ActuatorModel
+            Hysteresis parameters and dynamics.
+        noise : float
+            Sensor noise standard deviation (output units).
+        family : str, optional
+            The hysteresis family of ``model`` (default: the file's).
+
+        Returns
+        -------
+        HysteresisActuator
+            The plant, at rest at input 0 clipped into the input bounds.
+        """
         hysteresis, creep_order = build_hysteresis(family or self.family, dataclasses.asdict(model.hysteresis),
                                                    self.sample_period)
         rest = float(np.clip(0.0, *self.input_bounds))
@@ -440,8 +381,15 @@ class ActuatorSpec:
                                   model.dynamics.delay_samples, noise, self.input_bounds, rest_input=rest,
                                   creep_order=creep_order)
 
-    def _runner_up(self) -> dict | None:
-        """The ranking's row of the second family, with its model document (None without one)."""
+    def runner_up(self) -> dict | None:
+        """The ranking's row of the second family, with its model document.
+
+        Returns
+        -------
+        dict or None
+            The ``identify auto`` ranking's second row (None when the document has no ranking
+            with a second family).
+        """
         candidates = self._document.get("candidates")
         if not isinstance(candidates, list):
             return None
@@ -455,8 +403,13 @@ class ActuatorSpec:
         The weight is the model's validation error without the sensor noise, ``sqrt(v² − σ²)``,
         over the two models' RMS distance on the validation record, so that the plant differs from
         the model by what the model missed on the record.
+
+        Returns
+        -------
+        float
+            The weight; 1 when the document has no finite validation RMSE or the distance is 0.
         """
-        row = self._runner_up()
+        row = self.runner_up()
         validation = self._document.get("validation")
         v = validation.get("rmse") if isinstance(validation, dict) else None
         if not isinstance(v, int | float) or not np.isfinite(v):
@@ -471,12 +424,22 @@ class ActuatorSpec:
         It is the runner-up's model for ``runner-up``, a document's for a path, None for ``model``
         (it follows the ``model`` group); ``ValueError`` naming what is wrong. A truth's dynamics
         are the file's ``[dynamics]`` when it has one, else its document's.
+
+        Parameters
+        ----------
+        name : str
+            ``model``, ``runner-up`` or a model document's path (relative to the actuator file).
+
+        Returns
+        -------
+        tuple of (str, ActuatorModel) or None
+            The truth's family and model (read once, then kept).
         """
         if name == "model":
             return None
         if name not in self._truths:
             if name == "runner-up":
-                row = self._runner_up()
+                row = self.runner_up()
                 if row is None:
                     raise ValueError("plant.truth = 'runner-up' needs a model document written by identify auto with a "
                                      "second family ranked; allowed here: model, or a model document's path")
@@ -501,6 +464,16 @@ class ActuatorSpec:
         For ``plant.truth = runner-up`` it is the ``model`` group and the runner-up in parallel,
         blended by :meth:`runner_up_weight`; else the truth's model (:meth:`truth`; the ``model``
         group for ``model``).
+
+        Parameters
+        ----------
+        config : dict
+            Parameter groups (``plant`` and ``model`` are read).
+
+        Returns
+        -------
+        HysteresisActuator or BlendedActuator
+            The plant.
         """
         plant: ActuatorPlant = config["plant"]
         nominal = perturb(config["model"], self.family, plant.mismatch, plant.seed)
@@ -515,7 +488,22 @@ class ActuatorSpec:
                                self.runner_up_weight(), plant.noise)
 
     def build_pid(self, config: dict, feedforward: bool, gains: PidGains | None = None):
-        """``pid`` or ``inverse-ff-pid`` on the ``model`` group."""
+        """``pid`` or ``inverse-ff-pid`` on the ``model`` group.
+
+        Parameters
+        ----------
+        config : dict
+            Parameter groups.
+        feedforward : bool
+            Build ``inverse-ff-pid`` (the inverse hysteresis feed-forward), else ``pid``.
+        gains : PidGains, optional
+            The gains (default: the config's ``inverse_ff_pid`` or ``pid`` group).
+
+        Returns
+        -------
+        PidController
+            The controller.
+        """
         model: ActuatorModel = config["model"]
         gains = gains if gains is not None else config["inverse_ff_pid" if feedforward else "pid"]
         if not feedforward:
@@ -532,7 +520,18 @@ class ActuatorSpec:
         return max(self.noise, 1e-3 * (self.output_range[1] - self.output_range[0]))
 
     def build_nmpc(self, config: dict) -> NmpcController:
-        """The NMPC on the smoothed model, EKF from the sensor noise, inverse warm start."""
+        """The NMPC on the smoothed model, EKF from the sensor noise, inverse warm start.
+
+        Parameters
+        ----------
+        config : dict
+            Parameter groups (``model``, ``smoothing``, ``nmpc``, ``solver``).
+
+        Returns
+        -------
+        NmpcController
+            The controller.
+        """
         model: ActuatorModel = config["model"]
         smoothing: Smoothing = config["smoothing"]
         hysteresis, creep_order = self.hysteresis(model)
@@ -550,6 +549,18 @@ class ActuatorSpec:
         The exact inverse hysteresis in series with the input (its memory follows the inputs sent)
         turns a virtual input ``v`` into the input; a linear MPC with an input disturbance
         (offset-free; creep lands in it) controls the linear block and dead time from ``v``.
+
+        Parameters
+        ----------
+        config : dict
+            Parameter groups.
+        settings : LinearMpcSettings, optional
+            The linear MPC's settings (default: the config's ``lmpc`` group).
+
+        Returns
+        -------
+        InverseLinearMpc
+            The controller.
         """
         model: ActuatorModel = config["model"]
         hysteresis, _ = self.hysteresis(model)
@@ -574,45 +585,28 @@ class ActuatorSpec:
         The gains come from :func:`hystmpc.experiments.tuning.tune_pid` on the nominal ``model``
         group. For ``inverse-ff-pid`` also its preview: of dead time + one sample + the block's
         lag and its two neighbours, the one with the best point of the coarse gain grid, before
-        the gains are tuned at it. For ``inverse-lmpc`` its rate weight (:meth:`_tune_lmpc`).
+        the gains are tuned at it. For ``inverse-lmpc`` its rate weight
+        (:func:`hystmpc.experiments.tuning.tuned_baselines`).
 
-        Tuning takes seconds to tens of seconds, so the result is kept in memory and on disk
+        Tuning runs many closed loops, so the result is kept in memory and on disk
         (:func:`hystmpc.mpc.codegen.user_cache_dir`), keyed by everything it depends on.
+
+        Parameters
+        ----------
+        config : dict
+            Parameter groups before tuning (``model`` and ``lmpc`` are read).
+
+        Returns
+        -------
+        dict
+            ``pid`` (PidGains), ``inverse_ff_pid`` (FeedforwardPidGains) and ``lmpc``
+            (LinearMpcSettings).
         """
         model = config["model"]
         key = repr(model)
         if key not in self._tuned:
-            self._tuned[key] = self._cached_tuning(model, config)
+            self._tuned[key] = tuned_baselines(self, model, config)
         return self._tuned[key]
-
-    def _cached_tuning(self, model: ActuatorModel, config: dict) -> dict[str, Any]:
-        from hystmpc.experiments.report import version
-        identity = json.dumps({"rule": TUNING_RULE, "version": version(), "model": dataclasses.asdict(model),
-                               "sample_period": self.sample_period, "bounds": self.input_bounds,
-                               "rate": str(self.input_rate), "scenarios": [self.sine_hz, self.step_s, self.duration_s],
-                               "output_range": self.output_range, "noise": self.noise,
-                               "lmpc": dataclasses.asdict(config["lmpc"]), "lmpc_factors": LMPC_RATE_FACTORS,
-                               "runner_up": self._runner_up(),
-                               "runner_up_weight": self.runner_up_weight() if self._runner_up() else None},
-                              sort_keys=True, default=str)
-        path = user_cache_dir() / f"tuning-{hashlib.sha256(identity.encode()).hexdigest()[:20]}.json"
-        try:
-            stored = json.loads(path.read_text())
-            return {"pid": PidGains(**stored["pid"]), "inverse_ff_pid": FeedforwardPidGains(**stored["inverse_ff_pid"]),
-                    "lmpc": LinearMpcSettings(**stored["lmpc"])}
-        except (OSError, ValueError, KeyError, TypeError):
-            pass
-        LOG.info("tuning the baselines of %s on its nominal model%s (once; cached in %s)", self.name,
-                 " and the runner-up blend" if self._runner_up() else "", path.parent)
-        tuned = self._tune(model, config)
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            partial = path.with_suffix(f".{os.getpid()}.tmp")
-            partial.write_text(json.dumps({k: dataclasses.asdict(v) for k, v in tuned.items()}))
-            partial.replace(path)
-        except OSError as exc:  # a read-only home: tune again next time
-            LOG.info("could not cache the tuned gains (%s)", exc)
-        return tuned
 
     def tuning_ensemble(self, model: ActuatorModel, noise: float) -> list:
         """The plants the baselines are tuned on: what the identification knows of the model's error.
@@ -620,81 +614,34 @@ class ActuatorSpec:
         They are the ``model`` group exact, and where the document ranks a runner-up the
         ``runner-up`` plant unperturbed (the model moved toward the runner-up by
         :meth:`runner_up_weight`).
+
+        Parameters
+        ----------
+        model : ActuatorModel
+            The ``model`` group.
+        noise : float
+            Sensor noise standard deviation of the plants (output units).
+
+        Returns
+        -------
+        list
+            One or two plants.
         """
         plants = [self.plant_of(model, noise)]
-        if self._runner_up() is not None:
+        if self.runner_up() is not None:
             family, other = self.truth("runner-up")
             plants.append(BlendedActuator(self.plant_of(model, 0.0), self.plant_of(other, 0.0, family),
                                           self.runner_up_weight(), noise))
         return plants
 
-    def _tune(self, model: ActuatorModel, config: dict) -> dict[str, Any]:
-        from hystmpc.experiments.tuning import coarse_start, mean_rmse, tune_pid
-        hysteresis, _ = self.hysteresis(model)
-        state = hysteresis.initial_state(self.input_bounds[0])
-        _, y_lo = hysteresis.step(state, self.input_bounds[0])
-        _, y_hi = hysteresis.step(state, self.input_bounds[1])
-        gain = (y_hi - y_lo) / (self.input_bounds[1] - self.input_bounds[0])
-        dead = (model.dynamics.delay_samples + 1) * self.sample_period + model.dynamics.lag()
-        plants = self.tuning_ensemble(model, 0.0)
-        scenarios = list(self.scenarios().values())
-        pid = tune_pid(lambda g: self.build_pid(config | {"model": model}, False, g), plants, scenarios,
-                       gain, dead, self.sample_period)[0]
-        rule = model.dynamics.delay_samples + 1 + int(round(model.dynamics.lag() / self.sample_period))
-
-        def feedforward(preview):
-            return lambda g: self.build_pid(config | {"model": model}, True,
-                                            FeedforwardPidGains(**dataclasses.asdict(g), preview=preview))
-
-        def coarse(preview, reject=True):
-            def cost(z):
-                gains = PidGains(kp=float(np.exp(z[0])), ki=float(np.exp(z[1])),
-                                 derivative_filter=3 * self.sample_period)
-                return mean_rmse(feedforward(preview)(gains), plants, scenarios, reject)
-            return coarse_start(cost, gain, dead, self.sample_period)[1]
-        previews = (rule - 1, rule, rule + 1)
-        costs = {p: coarse(p) for p in previews}
-        if not np.isfinite(min(costs.values())):  # every point rings at every preview: RMSE alone decides
-            costs = {p: coarse(p, False) for p in previews}
-        preview = min(previews, key=costs.get)
-        gains = tune_pid(feedforward(preview), plants, scenarios, gain, dead, self.sample_period)[0]
-        return {"pid": pid, "inverse_ff_pid": FeedforwardPidGains(**dataclasses.asdict(gains), preview=preview),
-                "lmpc": self._tune_lmpc(model, config, scenarios)}
-
-    def _tune_lmpc(self, model: ActuatorModel, config: dict, scenarios: list[Scenario]) -> LinearMpcSettings:
-        """``inverse-lmpc``'s rate weight, chosen among multiples of the default by mean RMSE.
-
-        Of the default times each of :data:`LMPC_RATE_FACTORS`, it is the one with the least mean
-        RMSE over ``scenarios`` on the tuning ensemble (:meth:`tuning_ensemble`) with no run that
-        rings (:data:`~hystmpc.experiments.tuning.RING_CYCLES`; when every one does, the least mean
-        RMSE, with a warning), with the file's sensor noise (the noise sets how fast it may act),
-        drawn with another seed than the comparison's.
-        """
-        from hystmpc.experiments.tuning import mean_rmse
-        plants = self.tuning_ensemble(model, self.noise)
-        base: LinearMpcSettings = config["lmpc"]
-        tried = []
-        for factor in LMPC_RATE_FACTORS:
-            settings = dataclasses.replace(base, r_rate=base.r_rate * factor)
-            controller = self.build_inverse_lmpc(config | {"model": model}, settings)
-            clean = mean_rmse(controller, plants, scenarios, seed=TUNING_SEED)
-            any_run = clean if np.isfinite(clean) else mean_rmse(controller, plants, scenarios, False, TUNING_SEED)
-            tried.append((clean, any_run, factor, settings))
-        clean, any_run, factor, best = min(tried, key=lambda row: row[:2])
-        if not np.isfinite(any_run):
-            LOG.warning("inverse-lmpc: every rate weight tried failed; it keeps the default %.4g (set lmpc.r_rate)",
-                        base.r_rate)
-            return base
-        if not np.isfinite(clean):
-            LOG.warning("inverse-lmpc: every rate weight tried rings on the tuning ensemble; it takes the one "
-                        "with the least mean RMSE, %.4g (set lmpc.r_rate)", best.r_rate)
-        elif factor in (LMPC_RATE_FACTORS[0], LMPC_RATE_FACTORS[-1]):
-            LOG.warning("inverse-lmpc: the tuned rate weight %.4g is at the edge of the grid tried; a better one may "
-                        "lie beyond (set lmpc.r_rate)", best.r_rate)
-        return best
-
     def scenarios(self) -> dict[str, Scenario]:
-        """``sine`` and ``staircase`` over the output range, from the output at rest."""
+        """``sine`` and ``staircase`` over the output range, from the output at rest.
+
+        Returns
+        -------
+        dict
+            The two :class:`Scenario` by name.
+        """
         lo, hi = self.output_range
         span, mid = hi - lo, 0.5 * (lo + hi)
         hysteresis, _ = self.hysteresis(ActuatorModel(
@@ -722,7 +669,13 @@ class ActuatorSpec:
                                       self.step_s * len(levels), staircase)}
 
     def bench(self) -> Bench:
-        """The actuator as a :class:`Bench`."""
+        """The actuator as a :class:`Bench`.
+
+        Returns
+        -------
+        Bench
+            With the ``pid``, ``inverse-ff-pid``, ``inverse-lmpc`` and ``nmpc`` controllers.
+        """
         controllers = {
             "pid": ControllerSpec("pid", "PID, gains tuned on the tuning ensemble",
                                   lambda c: self.build_pid(c, False), ("model", "pid")),
@@ -733,7 +686,7 @@ class ActuatorSpec:
                                            "linear MPC (OSQP) on the linear block, rate weight tuned on the tuning "
                                            "ensemble", self.build_inverse_lmpc, ("model", "lmpc")),
             "nmpc": ControllerSpec("nmpc", "NMPC on the smoothed identified model, inverse warm start",
-                                   self.build_nmpc, ("model", "nmpc", "smoothing", "solver")),
+                                   self.build_nmpc, ("model", "nmpc", "smoothing", "solver"), planner="inverse-lmpc"),
         }
         return Bench(name=self.name, description=self.description, paper="", output_name=self.output_name,
                      units=self.units, input_units=self.input_units, sample_period=self.sample_period,
@@ -744,25 +697,6 @@ class ActuatorSpec:
                      loop=("input", "hysteresis_output", f"input [{self.input_units}]",
                            f"hysteresis output [{self.units}]"),
                      default_scenario="sine", source=str(self.path), fixed=self._unused_keys())
-
-
-def _kind(value) -> str | None:
-    """What a TOML value must be to set a field holding ``value`` (None: not checked here)."""
-    if isinstance(value, bool):
-        return "true or false"
-    if isinstance(value, str):
-        return "text"
-    if isinstance(value, int):
-        return "an integer"
-    if isinstance(value, float):
-        return "a number"
-    return None
-
-
-def _fits(value, expected: str) -> bool:
-    """Whether a TOML value is of the ``expected`` kind (an integer is a number as well)."""
-    kind = _kind(value)
-    return kind == expected or (expected == "a number" and kind == "an integer")
 
 
 def _flatten(table: dict, prefix: str = ""):
@@ -780,6 +714,16 @@ def load_actuator(path: str | Path) -> Bench:
     """The bench of an actuator file (``ValueError`` naming the bad key).
 
     It is cached per file and modification time, so a command builds and tunes it once.
+
+    Parameters
+    ----------
+    path : str or Path
+        The actuator file (TOML).
+
+    Returns
+    -------
+    Bench
+        The bench.
     """
     path = Path(path).resolve()
     try:

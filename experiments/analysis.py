@@ -11,8 +11,20 @@ def smoothing_error(model, inputs, eps: float, window: int, **smooth_options) ->
     Works for any model with the common shape (``initial_state``, ``step``,
     ``smooth_step``). Two figures: the whole sequence open loop, and the worst over
     windows of ``window`` steps each restarted from the exact state, which is what the
-    NMPC's prediction faces (its estimate is re-anchored every sample). Extra keyword
-    arguments go to ``model.smooth_step``.
+    NMPC's prediction faces (its estimate is re-anchored every sample).
+
+    Parameters
+    ----------
+    model : object
+        The hysteresis model.
+    inputs : array_like
+        Input sequence, at least two samples; the models start from ``model.initial_state(inputs[0])``.
+    eps : float
+        Smoothing parameter given to ``model.smooth_step``.
+    window : int
+        Length of the windows (steps, at least 1); they start every ``window // 2`` steps.
+    **smooth_options
+        More keyword arguments for ``model.smooth_step``.
 
     Returns
     -------
@@ -53,10 +65,23 @@ def smoothing_error(model, inputs, eps: float, window: int, **smooth_options) ->
 def creep_window_error(model, inputs, windows) -> dict[str, dict[str, float]]:
     """Creep output of an FCKP model with memory window L against the full memory.
 
-    ``model`` is a :class:`hystmpc.models.fckp.Fckp`; the same input sequence drives the full-memory
-    creep (the plant's) and each truncated one (L past samples, the short-memory principle).
-    Returns, per window (``"full"`` for None), the max and RMS difference in W and the
-    relative RMS difference (against the RMS of W).
+    The same input sequence drives the full-memory creep (the plant's) and each truncated one
+    (L past samples, the short-memory principle).
+
+    Parameters
+    ----------
+    model : Fckp
+        A :class:`hystmpc.models.fckp.Fckp`.
+    inputs : array_like
+        Input sequence.
+    windows : iterable of int or None
+        Memory windows L (samples) to compare; None is the full memory.
+
+    Returns
+    -------
+    dict
+        Per window (its number as a string, ``"full"`` for None): ``max`` and ``rms``, the max
+        and RMS difference in W, and ``relative_rms``, the RMS difference against the RMS of W.
     """
     inputs = np.asarray(inputs, float)
     state = model.initial_state()

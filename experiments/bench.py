@@ -15,10 +15,13 @@ from typing import Any
 
 import numpy as np
 
-from hystmpc.experiments.config import apply_overrides
+from hystmpc.experiments.config import apply_overrides, apply_values
 from hystmpc.experiments.own_plant import check_plant, describe_plant
+from hystmpc.experiments.report import version
 from hystmpc.experiments.runner import Controller, InputGuard, Labels, RunResult, Scenario, simulate
-from hystmpc.mpc.settings import GaussNewtonSettings
+from hystmpc.mpc.codegen import Signals
+from hystmpc.mpc.runtime import CodeLabels, assemble_nmpc, validate_nmpc
+from hystmpc.mpc.settings import GaussNewtonSettings, NmpcSettings
 
 MULTIPLE_SHOOTING = {f"solver.gn.{f.name}": "solver gn solves single-shooting problems; this bench's NMPC is "
                      "multiple shooting (use ipopt, sqp, rti or rti-c)" for f in fields(GaussNewtonSettings)}
@@ -38,6 +41,10 @@ class ControllerSpec:
     """Gets a configuration holding ``groups`` only."""
     groups: tuple[str, ...]
     """Configuration groups the controller reads."""
+    planner: str = "inverse-lmpc"
+    """The bench's controller whose plan this one takes as its inverse-model inputs when its
+    NMPC settings say ``inverse_plan=linear-mpc`` (``""``: none; read only by a controller
+    that reads NMPC settings)."""
 
 
 @dataclass(frozen=True)
@@ -96,12 +103,30 @@ class Bench:
                       self.sensor_units)
 
     def configure(self, assignments=(), tuned: bool = True) -> dict[str, Any]:
-        """The default configuration with ``KEY=VALUE`` assignments applied.
+        """The default configuration with settings applied.
 
-        ``ValueError`` naming a bad or fixed key. ``tuned=False``: with :attr:`untuned_defaults`
-        where the bench has them (for the NMPC alone, or to check the settings).
+        Parameters
+        ----------
+        assignments : iterable of str, or dict
+            ``KEY=VALUE`` texts, as ``--set`` takes them, or a dict of typed values
+            (``{"nmpc.horizon": 30, "nmpc.multistart": True}``).
+        tuned : bool
+            False: with :attr:`untuned_defaults` where the bench has them (for the NMPC
+            alone, or to check the settings).
+
+        Returns
+        -------
+        dict
+            A fresh configuration (parameter groups) with the settings applied.
+
+        Raises
+        ------
+        ValueError
+            Naming a bad or fixed key, or a bad value.
         """
         defaults = self.defaults if tuned or self.untuned_defaults is None else self.untuned_defaults
+        if isinstance(assignments, dict):
+            return apply_values(defaults(), assignments, self.fixed, source="setting")
         return apply_overrides(defaults(), list(assignments), self.fixed)
 
     def _groups(self, config: dict[str, Any], groups: tuple[str, ...], who: str) -> dict[str, Any]:
@@ -111,52 +136,144 @@ class Bench:
         return {g: config[g] for g in groups}
 
     def build_plant(self, config: dict[str, Any]):
-        """The simulated plant of ``config``."""
+        """The simulated plant of ``config``.
+
+        Parameters
+        ----------
+        config : dict
+            The configuration; ``make_plant`` gets its :attr:`plant_groups` only.
+
+        Returns
+        -------
+        Plant
+            What ``make_plant`` builds.
+        """
         return self.make_plant(self._groups(config, self.plant_groups, "the plant"))
 
     def plant_only_groups(self) -> tuple[str, ...]:
-        """The configuration groups only the bench's plant reads (no controller does)."""
+        """The configuration groups only the bench's plant reads (no controller does).
+
+        Returns
+        -------
+        tuple of str
+            Those of :attr:`plant_groups` that no controller spec lists.
+        """
         read_by_controllers = {g for spec in self.controllers.values() for g in spec.groups}
         return tuple(g for g in self.plant_groups if g not in read_by_controllers)
 
     def sensors(self, config: dict[str, Any] | None = None) -> tuple[str, ...]:
-        """The measured signals besides ``y`` that the bench's plant gives (a controller may read them)."""
+        """The measured signals besides ``y`` that the bench's plant gives (a controller may read them).
+
+        Parameters
+        ----------
+        config : dict, optional
+            The configuration of the plant (default: :meth:`configure` with no changes).
+
+        Returns
+        -------
+        tuple of str
+            The sensor names of the plant's first measurement (reset with seed 0).
+        """
         config = self.configure() if config is None else config
         return tuple(self.build_plant(config).reset(0).sensors)
 
     def build_controller(self, name: str, config: dict[str, Any]) -> Controller:
-        """Controller ``name`` built from ``config``."""
+        """Controller ``name`` built from ``config``.
+
+        A controller that reads NMPC settings (a group holding
+        :class:`~hystmpc.mpc.settings.NmpcSettings`) runs where they say
+        (``nmpc.runtime``) and takes its inverse-model inputs from where they say
+        (``nmpc.inverse_plan``: its spec's :attr:`ControllerSpec.planner`):
+        :func:`hystmpc.mpc.runtime.assemble_nmpc`.
+
+        Parameters
+        ----------
+        name : str
+            One of :attr:`controllers`.
+        config : dict
+            The configuration; the controller gets only the groups its spec lists.
+
+        Returns
+        -------
+        Controller
+            The controller, ready for a run.
+
+        Raises
+        ------
+        ValueError
+            An unknown ``name``, a group ``config`` lacks, or NMPC settings that cannot run.
+        """
+        spec = self._spec(name)
+        groups = self._groups(config, spec.groups, f"controller {name!r}")
+        nmpc = [g for g, settings in groups.items() if isinstance(settings, NmpcSettings)]
+        if not nmpc:
+            return spec.build(groups)
+        if len(nmpc) > 1:
+            raise ValueError(f"controller {name!r} reads two NMPC settings groups ({', '.join(nmpc)}); one is allowed")
+        [group] = nmpc
+        labels = self.labels
+        code_labels = CodeLabels(Signals(labels.output_name, labels.units, labels.input_units,
+                                         tuple(labels.sensor_units)), self.sample_period, self.name, version())
+        return assemble_nmpc(lambda settings: spec.build({**groups, group: settings}), groups[group], code_labels,
+                             planner=lambda: self._planner(spec, config, groups[group]))
+
+    def _spec(self, name: str) -> ControllerSpec:
         if name not in self.controllers:
             raise ValueError(f"unknown controller {name!r}; allowed: {', '.join(self.controllers)}")
-        spec = self.controllers[name]
-        if name == "nmpc":
-            from hystmpc.experiments.firmware import compiled_controller, runs_generated
-            if runs_generated(config):
-                return compiled_controller(self, config)
-        if name == "nmpc" and getattr(config.get("nmpc"), "inverse_plan", "static") == "linear-mpc":
-            return self._planned_nmpc(spec, config)
-        return spec.build(self._groups(config, spec.groups, f"controller {name!r}"))
+        return self.controllers[name]
 
-    def _planned_nmpc(self, spec: ControllerSpec, config: dict[str, Any]) -> Controller:
-        """The NMPC with the ``inverse-lmpc`` baseline as its planner (``nmpc.inverse_plan=linear-mpc``)."""
-        why = "nmpc.inverse_plan=linear-mpc takes the plan of the inverse-lmpc baseline"
-        if "inverse-lmpc" not in self.controllers:
+    def _planner(self, spec: ControllerSpec, config: dict[str, Any], nmpc: NmpcSettings) -> Controller:
+        """The controller whose plan ``spec``'s NMPC takes (``nmpc.inverse_plan=linear-mpc``)."""
+        if not spec.planner:
+            raise ValueError(f"nmpc.inverse_plan=linear-mpc takes the plan of a linear MPC baseline, and controller "
+                             f"{spec.name!r} names none; set nmpc.inverse_plan=static")
+        why = f"nmpc.inverse_plan=linear-mpc takes the plan of the {spec.planner} baseline"
+        if spec.planner not in self.controllers:
             raise ValueError(f"{why}, which bench {self.name!r} lacks; set nmpc.inverse_plan=static")
-        horizons = (config["nmpc"].horizon, getattr(config.get("lmpc"), "horizon", config["nmpc"].horizon))
-        if horizons[0] != horizons[1]:
-            raise ValueError(f"{why} over the NMPC's horizon: lmpc.horizon={horizons[1]} differs from "
-                             f"nmpc.horizon={horizons[0]}; drop lmpc.horizon, or set nmpc.inverse_plan=static")
+        planner_spec = self.controllers[spec.planner]
+        horizons = [(f"{g}.horizon", config[g].horizon) for g in planner_spec.groups
+                    if hasattr(config.get(g), "horizon")]
+        for key, horizon in horizons:
+            if horizon != nmpc.horizon:
+                raise ValueError(f"{why} over the NMPC's horizon: {key}={horizon} differs from "
+                                 f"nmpc.horizon={nmpc.horizon}; drop {key}, or set nmpc.inverse_plan=static")
         try:
-            planner = self.build_controller("inverse-lmpc", config)
+            return self.build_controller(spec.planner, config)
         except ValueError as exc:
             raise ValueError(f"{exc} ({why}; or set nmpc.inverse_plan=static)") from None
-        planner.prepare_plan()
-        controller = spec.build(self._groups(config, spec.groups, "controller 'nmpc'"))
-        controller.planner = planner
-        return controller
+
+    def validate(self, config: dict[str, Any], controllers=None) -> None:
+        """``ValueError`` for settings that cannot run, before any work.
+
+        Checks the NMPC settings of ``controllers`` with their solver settings
+        (:func:`hystmpc.mpc.runtime.validate_nmpc`); the dataclasses checked each value when
+        they were made.
+
+        Parameters
+        ----------
+        config : dict
+            The configuration.
+        controllers : iterable of str, optional
+            Names of the controllers to check (default: all of the bench's).
+        """
+        for name in self.controllers if controllers is None else controllers:
+            for group in self._spec(name).groups:
+                if isinstance(config.get(group), NmpcSettings):
+                    validate_nmpc(config[group], config.get("solver"))
 
     def scenario(self, name: str) -> Scenario:
-        """Scenario ``name``."""
+        """Scenario ``name``.
+
+        Parameters
+        ----------
+        name : str
+            One of :attr:`scenarios`.
+
+        Returns
+        -------
+        Scenario
+            The scenario (``ValueError`` naming the allowed ones when there is none).
+        """
         if name not in self.scenarios:
             raise ValueError(f"unknown scenario {name!r}; allowed: {', '.join(self.scenarios)}")
         return self.scenarios[name]
@@ -165,9 +282,26 @@ class Bench:
                 plant=None) -> Prepared:
         """The plant and controller for a run, with the scenario's conditions applied.
 
-        ``plant``: your own plant (a rig, your own simulator) instead of the bench's; see
-        :meth:`run`. Raises ``ValueError`` for settings the plant or controller cannot take,
-        before anything runs.
+        Parameters
+        ----------
+        scenario : Scenario or str
+            A scenario (or its name); its conditions are applied to ``config``.
+        controller : str
+            One of :attr:`controllers`.
+        config : dict, optional
+            Parameter groups (default: :meth:`configure` with no changes).
+        plant : Plant, optional
+            Your own plant (a rig, your own simulator) instead of the bench's; see :meth:`run`.
+
+        Returns
+        -------
+        Prepared
+            The scenario, configuration, plant and controller of the run.
+
+        Raises
+        ------
+        ValueError
+            For settings the plant or controller cannot take, before anything runs.
         """
         scenario = self.scenario(scenario) if isinstance(scenario, str) else scenario
         config = self.configure() if config is None else config
@@ -186,6 +320,7 @@ class Bench:
                     raise ValueError(f"scenario {scenario.name!r} sets {', '.join(reaching)} on the bench's plant, "
                                      "which your own plant does not read; run it on the bench's plant")
             config = apply_overrides(config, list(scenario.conditions))
+        self.validate(config, [controller])
         if plant is not None:
             check_plant(plant, self.sample_period, self.sensors(config))
         return Prepared(scenario, controller, config, self.build_plant(config) if plant is None else plant,
@@ -218,6 +353,12 @@ class Bench:
             checked by :func:`hystmpc.experiments.own_plant.check_plant`) instead of the bench's,
             or in ``prepared``.
             The controller is the bench's, tuned as usual; the plant guard still applies.
+
+        Returns
+        -------
+        RunResult
+            The closed-loop run with its metrics, its parameters and the paper's figures
+            (none with your own plant).
         """
         if prepared is None:
             prepared = self.prepare(scenario, controller, config, plant)

@@ -74,7 +74,20 @@ def _check(args) -> int:
 
 
 def identify_command(args) -> int:
-    """Run ``identify`` for a model family or ``auto`` (``args`` from the ``hystmpc`` parser); returns the exit code."""
+    """Run ``identify`` for a model family or ``auto`` (``args`` from the ``hystmpc`` parser); returns the exit code.
+
+    Writes the model document to ``--out`` and, unless ``--no-plots``, its figures beside it.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed ``identify`` command line.
+
+    Returns
+    -------
+    int
+        0 (a problem raises instead, e.g. ``ValueError`` for bad options or files).
+    """
     from hystmpc.experiments.report import version
     max_delay = _check(args)
     options = _options(args.family, args.overrides)
@@ -190,7 +203,21 @@ def _warn(doc: dict, y) -> None:
 
 
 def ranking_table(ranking, units: str) -> str:
-    """The ``auto`` ranking as a table for the terminal."""
+    """The ``auto`` ranking as a table for the terminal.
+
+    Parameters
+    ----------
+    ranking : Ranking
+        The result of :func:`hystmpc.models.identify_auto.identify_auto`; its naive model is the
+        last row and the validation RMSEs' yardstick.
+    units : str
+        Units of the output (may be empty).
+
+    Returns
+    -------
+    str
+        The table, one line per candidate.
+    """
     unit = f" [{units}]" if units else ""
     naive = ranking.naive.validation_rmse
     lines = [f"validation on {ranking.validation}",
@@ -207,7 +234,19 @@ def ranking_table(ranking, units: str) -> str:
 def model_path(out: str | None, default_name: str = "model.json") -> Path:
     """``--out``'s model document file.
 
-    ``ValueError`` for a folder. The default is under ``results/identify/<timestamp>/``.
+    ``ValueError`` for a folder.
+
+    Parameters
+    ----------
+    out : str or None
+        The ``--out`` value; None for the default, under ``results/identify/<timestamp>/``.
+    default_name : str, optional
+        File name of the default, and of the suggestion when ``out`` is a folder.
+
+    Returns
+    -------
+    Path
+        The file to write (not created here).
     """
     if out is None:
         return Path("results") / "identify" / dt.datetime.now(dt.UTC).strftime("%Y%m%dT%H%M%SZ") / default_name
@@ -218,7 +257,18 @@ def model_path(out: str | None, default_name: str = "model.json") -> Path:
 
 
 def summary(doc: dict) -> str:
-    """The parameters and fit of a model document, for the terminal."""
+    """The parameters and fit of a model document, for the terminal.
+
+    Parameters
+    ----------
+    doc : dict
+        A model document.
+
+    Returns
+    -------
+    str
+        Several lines: family, parameters, offsets, dynamics and the fit (and validation) RMSE.
+    """
     units = doc["units"].get("y", "")
     lines = [f"{doc['family']} ({FAMILIES[doc['family']].description})"]
     for name, value in doc["parameters"].items():
@@ -253,7 +303,28 @@ def _plt():
 
 def identification_figure(identified, fit: tuple, validation: tuple | None, continued: bool, path: Path, units: str,
                           input_units: str) -> Path:
-    """Measured against modelled output over time, and the loops (output against input)."""
+    """Measured against modelled output over time, and the loops (output against input).
+
+    Parameters
+    ----------
+    identified : Identified
+        The identified model.
+    fit : tuple of ndarray
+        The ``(u, y)`` record it was fitted on.
+    validation : tuple of ndarray or None
+        A validation record ``(u, y)``, drawn in a second row.
+    continued : bool
+        The validation record continues the fit record (the model runs through the fit first).
+    path : Path
+        The PNG file to write.
+    units, input_units : str
+        Units of the output and of the input.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     plt = _plt()
     records = [("fit", *fit, identified.predict(fit[0]))]
     if validation is not None:
@@ -283,6 +354,22 @@ def dynamics_figure(identified, record: tuple, path: Path, units: str) -> Path:
     """The dynamics' own fit: measured against modelled output on the record they were fitted on.
 
     The record is shown whole and around its fastest input change.
+
+    Parameters
+    ----------
+    identified : Identified
+        The identified model.
+    record : tuple of ndarray
+        The ``(u, y)`` record the dynamics were fitted on.
+    path : Path
+        The PNG file to write.
+    units : str
+        Units of the output.
+
+    Returns
+    -------
+    Path
+        ``path``.
     """
     plt = _plt()
     u, y = (np.asarray(v, float) for v in record)

@@ -19,7 +19,7 @@ MAX_RUN_SAMPLES = 1_000_000
 MAX_SWEEP_RUNS = 10_000
 """Runs in one sweep."""
 MAX_SWEEP_SAMPLES = 20_000_000
-"""Samples summed over every run of a sweep (about a day of NMPC compute on 2 cores)."""
+"""Samples summed over every run of a sweep."""
 
 FORCE_HINT = "pass --force to run it anyway"
 
@@ -29,7 +29,22 @@ class WorkLimitError(ValueError):
 
 
 def run_samples(duration: float, sample_period: float, what: str = "--duration") -> int:
-    """Samples in a run of ``duration`` seconds; ``ValueError`` unless finite and at least 2."""
+    """Samples in a run of ``duration`` seconds; ``ValueError`` unless finite and at least 2.
+
+    Parameters
+    ----------
+    duration : float
+        Length of the run (s), finite and positive.
+    sample_period : float
+        Sample period (s).
+    what : str, optional
+        Name of the value in the error message.
+
+    Returns
+    -------
+    int
+        ``round(duration / sample_period)``.
+    """
     if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
         raise ValueError(f"{what} must be a finite number of seconds > 0, got {duration}")
     n = int(round(duration / sample_period))
@@ -40,14 +55,32 @@ def run_samples(duration: float, sample_period: float, what: str = "--duration")
 
 
 def check_run_samples(n: int, what: str, force: bool) -> None:
-    """``WorkLimitError`` for a run longer than :data:`MAX_RUN_SAMPLES` (unless ``force``)."""
+    """``WorkLimitError`` for a run longer than :data:`MAX_RUN_SAMPLES` (unless ``force``).
+
+    Parameters
+    ----------
+    n : int
+        Samples in the run.
+    what : str
+        What needs them, for the error message.
+    force : bool
+        Lift the ceiling.
+    """
     if n > MAX_RUN_SAMPLES and not force:
         raise WorkLimitError(f"{what} needs {n:,} samples, above the limit of {MAX_RUN_SAMPLES:,} per run; "
                              f"{FORCE_HINT}")
 
 
 def check_horizons(config: dict[str, Any], force: bool) -> None:
-    """``WorkLimitError`` naming a group's ``horizon`` above :data:`MAX_HORIZON` (unless ``force``)."""
+    """``WorkLimitError`` naming a group's ``horizon`` above :data:`MAX_HORIZON` (unless ``force``).
+
+    Parameters
+    ----------
+    config : dict
+        Parameter groups by name; a group with an integer ``horizon`` attribute is checked.
+    force : bool
+        Lift the ceiling.
+    """
     if force:
         return
     for group, settings in config.items():
@@ -61,6 +94,15 @@ def check_sweep(n_runs: int, total_samples: int, force: bool) -> None:
     """``WorkLimitError`` for a sweep above the limits on runs or samples (unless ``force``).
 
     The limits are :data:`MAX_SWEEP_RUNS` runs and :data:`MAX_SWEEP_SAMPLES` samples in all.
+
+    Parameters
+    ----------
+    n_runs : int
+        Runs in the sweep.
+    total_samples : int
+        Samples summed over its runs.
+    force : bool
+        Lift the ceilings.
     """
     if force:
         return

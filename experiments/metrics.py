@@ -6,7 +6,18 @@ import numpy as np
 
 
 def tracking_metrics(reference, output) -> dict[str, float]:
-    """RMSE, MAE and max |error| of ``reference − output`` over the whole run."""
+    """RMSE, MAE and max |error| of ``reference − output`` over the whole run.
+
+    Parameters
+    ----------
+    reference, output : array_like
+        Reference and output samples, of the same length.
+
+    Returns
+    -------
+    dict
+        ``rmse``, ``mae``, ``max_abs_error`` (output units) and ``n_samples`` (int).
+    """
     e = np.asarray(reference, float) - np.asarray(output, float)
     return {"rmse": float(np.sqrt(np.mean(e**2))), "mae": float(np.mean(np.abs(e))),
             "max_abs_error": float(np.max(np.abs(e))), "n_samples": int(len(e))}
@@ -19,7 +30,23 @@ def step_metrics(t, reference, output, min_step: float) -> dict[str, float] | No
     of the time to the next jump (or the run's end): a controller with preview legitimately
     leaves early for the next step, and that must not count as not settled. Settling: the
     last time ``|error| > 2 %`` of the step size, measured from the jump. Steady-state error:
-    mean error over the last eighth of the judged window. Returns ``None`` without steps.
+    mean error over the last eighth of the judged window. An initial reference-output gap
+    larger than ``min_step`` counts as a step at the first sample.
+
+    Parameters
+    ----------
+    t : array_like
+        Sample times (s).
+    reference, output : array_like
+        Reference and output samples.
+    min_step : float
+        Smallest reference jump that counts as a step (output units).
+
+    Returns
+    -------
+    dict or None
+        Means over the steps: ``overshoot_pct`` (%), ``settling_time_s`` (s) and
+        ``steady_state_error`` (of its absolute value), with ``n_steps``; ``None`` without steps.
     """
     t = np.asarray(t, float)
     r = np.asarray(reference, float)
@@ -67,6 +94,18 @@ def reversals(signal, threshold: float) -> np.ndarray:
 
     A turn is where it has moved back from its last extremum by more than ``threshold`` (a swing
     smaller than that, e.g. sensor noise, is not a turn).
+
+    Parameters
+    ----------
+    signal : array_like
+        The samples.
+    threshold : float
+        Smallest move back that counts as a turn (signal units).
+
+    Returns
+    -------
+    ndarray
+        Sample indices (int) of the turns.
     """
     return _turns(signal, threshold)[0]
 
@@ -76,6 +115,16 @@ def noise_level(signal) -> float:
 
     The estimate is robust: 1.4826 × their median absolute deviation, over √6; a smooth signal
     gives about 0.
+
+    Parameters
+    ----------
+    signal : array_like
+        The samples.
+
+    Returns
+    -------
+    float
+        The estimated standard deviation (signal units); 0 for fewer than 3 samples.
     """
     x = np.asarray(signal, float)
     if len(x) < 3:
@@ -116,9 +165,21 @@ def oscillation_metrics(t, reference, output, threshold: float = OSCILLATION_THR
     does not count. A step response that overshoots turns once; a limit cycle turns twice
     per period for as long as it lasts.
 
-    Returns ``oscillation_cycles``, the longest train's cycles (turns / 2),
-    ``oscillation_hz``, its frequency (0 below two turns), and ``oscillating``, 1.0 when
-    the cycles reach :data:`OSCILLATING_CYCLES`.
+    Parameters
+    ----------
+    t : array_like
+        Sample times (s).
+    reference, output : array_like
+        Reference and output samples.
+    threshold : float, optional
+        Smallest turn, as a share of the reference's span (:data:`OSCILLATION_THRESHOLD`).
+
+    Returns
+    -------
+    dict
+        ``oscillation_cycles``, the longest train's cycles (turns / 2), ``oscillation_hz``, its
+        frequency (Hz; 0 below two turns), and ``oscillating``, 1.0 when the cycles reach
+        :data:`OSCILLATING_CYCLES`.
     """
     t = np.asarray(t, float)
     r = np.asarray(reference, float)
@@ -158,5 +219,15 @@ def input_metrics(u) -> dict[str, float]:
     """``input_tv``: the input's total variation Σ|u_k − u_{k−1}| (input units).
 
     It measures how much the actuator is moved, chattering included.
+
+    Parameters
+    ----------
+    u : array_like
+        The applied input samples.
+
+    Returns
+    -------
+    dict
+        ``input_tv``.
     """
     return {"input_tv": float(np.sum(np.abs(np.diff(np.asarray(u, float)))))}

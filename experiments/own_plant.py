@@ -21,8 +21,18 @@ from hystmpc.plants.base import Measurement
 def load_plant(spec: str) -> Any:
     """The plant ``CALLABLE()`` returns, for ``spec`` = ``"MODULE:CALLABLE"``.
 
-    ``MODULE`` is imported with the working directory on the path (a dotted name, or a
-    ``.py`` file's path). ``ValueError`` naming what is wrong otherwise.
+    ``ValueError`` naming what is wrong otherwise (also when ``CALLABLE()`` raises).
+
+    Parameters
+    ----------
+    spec : str
+        ``MODULE:CALLABLE``; ``MODULE`` is a dotted name, imported with the working directory on
+        the path, or a ``.py`` file's path.
+
+    Returns
+    -------
+    object
+        What ``CALLABLE()`` returned (not checked here: :func:`check_plant`).
     """
     module_name, sep, attribute = spec.rpartition(":")
     if not sep or not module_name or not attribute:
@@ -69,9 +79,18 @@ def _module(name: str):
 def check_plant(plant: Any, sample_period: float, expected_sensors=(), who: str = "the plant") -> None:
     """``ValueError`` unless ``plant`` has the Plant protocol and a usable first measurement.
 
-    The protocol is checked at ``sample_period`` (s); the first measurement must be finite and
-    carry ``expected_sensors`` (the ones the bench's controllers may read). Resets the plant once
-    (seed 0).
+    Resets the plant once (seed 0); the first measurement must be a ``Measurement`` with a finite ``y``.
+
+    Parameters
+    ----------
+    plant : object
+        The plant to check.
+    sample_period : float
+        The bench's sample period (s); the plant's must equal it.
+    expected_sensors : iterable of str, optional
+        Sensors the first measurement must carry (the ones the bench's controllers may read).
+    who : str, optional
+        How the error messages name the plant.
     """
     missing = [m for m in ("sample_period", "reset", "step") if not hasattr(plant, m)]
     if missing:
@@ -97,5 +116,16 @@ def check_plant(plant: Any, sample_period: float, expected_sensors=(), who: str 
 
 
 def describe_plant(plant: Any) -> str:
-    """How a result names a plant that is not the bench's: its ``description`` if it has one, else its class."""
+    """How a result names a plant that is not the bench's: its ``description`` if it has one, else its class.
+
+    Parameters
+    ----------
+    plant : object
+        The plant.
+
+    Returns
+    -------
+    str
+        The description, or the class's ``module.qualname``.
+    """
     return getattr(plant, "description", None) or f"{type(plant).__module__}.{type(plant).__qualname__}"

@@ -28,7 +28,21 @@ import numpy as np
 
 
 def do_mpc_problem(nmpc, solver_options: dict | None = None):
-    """A do-mpc MPC with the problem of ``nmpc`` (a :class:`hystmpc.mpc.MultipleShootingProblem`)."""
+    """A do-mpc MPC with the problem of ``nmpc``.
+
+    Parameters
+    ----------
+    nmpc : MultipleShootingProblem
+        hystmpc's problem (:class:`hystmpc.mpc.MultipleShootingProblem`) with ``r_input = 0``.
+    solver_options : dict, optional
+        IPOPT options added to do-mpc's ``nlpsol_opts``.
+
+    Returns
+    -------
+    tuple of (do_mpc.controller.MPC, dict)
+        The MPC, set up, and its time-varying parameters: set ``refs`` (``horizon + 1``
+        references, one per do-mpc stage) and ``d`` (the disturbance) before each step.
+    """
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         import do_mpc
@@ -89,7 +103,27 @@ def _quiet_peer():
 def first_inputs(nmpc, mpc, state, x0, d, u_prev: float, refs) -> tuple[float, float, float, float]:
     """First input of both for one problem instance, and each solve's wall time (s).
 
-    ``refs`` are r_{k+1..k+N} as :meth:`hystmpc.mpc.MultipleShootingProblem.solve` takes them.
+    Parameters
+    ----------
+    nmpc : MultipleShootingProblem
+        hystmpc's problem.
+    mpc : do_mpc.controller.MPC
+        Its do-mpc twin (:func:`do_mpc_problem`).
+    state : dict
+        The twin's time-varying parameters (:func:`do_mpc_problem`).
+    x0 : ndarray
+        The state estimate.
+    d : ndarray
+        The disturbance estimate.
+    u_prev : float
+        The last input.
+    refs : array_like
+        r_{k+1..k+N} as :meth:`hystmpc.mpc.MultipleShootingProblem.solve` takes them.
+
+    Returns
+    -------
+    tuple of float
+        ``(hystmpc's first input, do-mpc's, hystmpc's solve time, do-mpc's)`` (s).
     """
     refs = np.asarray(refs, float)
     start = time.perf_counter()
@@ -127,6 +161,21 @@ def compare_with_do_mpc(bench_name: str = "pam", samples: int = 5, duration: flo
 
     The states come from an IPOPT run of hystmpc's NMPC; both solvers then start from the
     same state, disturbance estimate, last input and reference window.
+
+    Parameters
+    ----------
+    bench_name : str, optional
+        The bench.
+    samples : int, optional
+        How many states (at most: repeated picks count once), evenly spread from a quarter of the run to its end.
+    duration : float, optional
+        Length of the closed-loop run (s).
+
+    Returns
+    -------
+    dict
+        ``bench`` and ``cases``: per state, both first inputs, their ``relative_difference`` and
+        both solve times (ms).
     """
     from hystmpc.experiments.benches import get_bench
     bench = get_bench(bench_name)
@@ -148,7 +197,13 @@ def compare_with_do_mpc(bench_name: str = "pam", samples: int = 5, duration: flo
 
 
 class DoMpcController:
-    """do-mpc solving hystmpc's problem, behind hystmpc's own observer (a :class:`Controller`)."""
+    """do-mpc solving hystmpc's problem, behind hystmpc's own observer (a :class:`Controller`).
+
+    Parameters
+    ----------
+    nmpc_controller : NmpcController
+        hystmpc's controller: its problem, observer and sensors.
+    """
 
     def __init__(self, nmpc_controller):
         self.inner = nmpc_controller
@@ -164,7 +219,20 @@ class DoMpcController:
         self.predicted_output = float("nan")
 
     def step(self, measurement, ref_window) -> float:
-        """do-mpc's input for this sample."""
+        """do-mpc's input for this sample.
+
+        Parameters
+        ----------
+        measurement : Measurement
+            This sample's measurement.
+        ref_window : ndarray
+            The references ``r_k..r_{k+N}``.
+
+        Returns
+        -------
+        float
+            The input to send.
+        """
         observer = self.inner.observer
         observer.update(self.inner.sensors(measurement), self._u_last)
         est = observer.estimate(self.horizon)
@@ -189,7 +257,20 @@ class DoMpcController:
 
 
 def time_do_mpc_closed_loop(bench_name: str = "pam", duration: float = 4.0) -> dict:
-    """do-mpc's per-step time over a closed-loop run (the same plant and EKF as hystmpc)."""
+    """do-mpc's per-step time over a closed-loop run (the same plant and EKF as hystmpc).
+
+    Parameters
+    ----------
+    bench_name : str, optional
+        The bench; its default scenario runs.
+    duration : float, optional
+        Length of the run (s).
+
+    Returns
+    -------
+    dict
+        ``bench``, ``steps``, ``step_ms_median``, ``step_ms_p95`` (ms) and ``ca_version``.
+    """
     from hystmpc.experiments.benches import get_bench
     bench = get_bench(bench_name)
     prepared = bench.prepare(bench.default_scenario, "nmpc")
@@ -201,7 +282,22 @@ def time_do_mpc_closed_loop(bench_name: str = "pam", duration: float = 4.0) -> d
 
 
 def benchmark(bench_name: str = "pam", duration: float = 20.0) -> dict:
-    """do-mpc and hystmpc's ``rti-c`` on the same closed-loop scenario, timed in one run."""
+    """do-mpc and hystmpc's ``rti-c`` on the same closed-loop scenario, timed in one run.
+
+    Parameters
+    ----------
+    bench_name : str, optional
+        The bench; its default scenario runs.
+    duration : float, optional
+        Length of each run (s).
+
+    Returns
+    -------
+    dict
+        The medians (ms) of do-mpc's step and of ``rti-c``'s solve, step and standalone C
+        program, and do-mpc's step over the two ``rti-c`` times (``ratio_solve``,
+        ``ratio_standalone``).
+    """
     from pathlib import Path
     from tempfile import TemporaryDirectory
 
@@ -242,8 +338,23 @@ def acados_rti_timing(acados_package, bench_name: str = "pam", qp_solvers=ACADOS
     acados_package : path
         The ``acados`` folder of the unpacked ``comma-deps-acados`` wheel (``install/`` with
         the libraries, headers and ``t_renderer``; ``acados_template/``).
+    bench_name : str, optional
+        The bench.
+    qp_solvers : tuple of str, optional
+        Acados' QP solvers to time (default: :data:`ACADOS_QP_SOLVERS`).
+    repeats : int, optional
+        Passes over the recorded problems per timing.
+    rounds : int, optional
+        Rounds over all the QP solvers.
     work : path, optional
         Where the generated acados and hystmpc code goes (default: a temporary folder).
+
+    Returns
+    -------
+    dict
+        ``bench``, ``scenario``, ``problems``, ``repeats``, ``ca_version`` and ``rows``: per
+        round and QP solver, acados' median and p95 (µs), its first inputs' differences from
+        hystmpc's step, and hystmpc's median and p95 (µs) with ``acados_over_hystmpc``.
     """
     import ctypes
     import os

@@ -30,8 +30,19 @@ def _finish(fig, path: str | Path | None, dpi: int = 110):
 def scenario_figure(runs: list[RunResult], path: str | Path | None = None):
     """Four panels for one scenario: reference vs output, error, input, hysteresis loop.
 
-    The signal names, units and loop come from the first run's labels. Saved to ``path``
-    (returned) or, without one, the figure is returned.
+    The signal names, units and loop come from the first run's labels.
+
+    Parameters
+    ----------
+    runs : list of RunResult
+        The runs on the scenario (the first one's reference is drawn).
+    path : str or Path, optional
+        Where to save the figure, creating the folder (default: do not save).
+
+    Returns
+    -------
+    Path or matplotlib.figure.Figure
+        The path when saved (the figure is closed), else the figure.
     """
     labels = runs[0].labels
     fig, axes = plt.subplots(2, 2, figsize=(12, 7.5))
@@ -65,7 +76,20 @@ def scenario_figure(runs: list[RunResult], path: str | Path | None = None):
 
 
 def rmse_figure(runs: list[RunResult], path: str | Path | None = None):
-    """Grouped bars: RMSE per scenario and controller (log scale), each bar labelled with its value."""
+    """Grouped bars: RMSE per scenario and controller (log scale), each bar labelled with its value.
+
+    Parameters
+    ----------
+    runs : list of RunResult
+        The runs; a missing scenario-controller pair leaves its bar empty.
+    path : str or Path, optional
+        Where to save the figure, creating the folder (default: do not save).
+
+    Returns
+    -------
+    Path or matplotlib.figure.Figure
+        The path when saved (the figure is closed), else the figure.
+    """
     scenarios = list(dict.fromkeys(r.scenario for r in runs))
     controllers = list(dict.fromkeys(r.controller for r in runs))
     width = 0.8 / len(controllers)
@@ -86,7 +110,20 @@ def rmse_figure(runs: list[RunResult], path: str | Path | None = None):
 
 
 def error_vs_reference_figure(runs: list[RunResult], path: str | Path | None = None):
-    """Error against the reference (linearisation error vs force, like katalenic2013 Fig. 11)."""
+    """Error against the reference (linearisation error vs force, like katalenic2013 Fig. 11).
+
+    Parameters
+    ----------
+    runs : list of RunResult
+        The runs on the scenario.
+    path : str or Path, optional
+        Where to save the figure, creating the folder (default: do not save).
+
+    Returns
+    -------
+    Path or matplotlib.figure.Figure
+        The path when saved (the figure is closed), else the figure.
+    """
     labels = runs[0].labels
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for r in runs:

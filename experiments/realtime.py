@@ -36,6 +36,14 @@ def check_codegen_settings(bench: Bench, config: dict) -> None:
     """``ValueError`` for an NMPC setting that ``codegen`` and ``speed`` do not read.
 
     Such a setting is a runtime other than the bench's default (cheap: checked before any work).
+    ``ValueError`` also when the bench has no NMPC settings.
+
+    Parameters
+    ----------
+    bench : Bench
+        The bench.
+    config : dict
+        Its parameter groups, as configured.
     """
     if "nmpc" not in config:
         raise ValueError(f"bench {bench.name!r} has no nmpc settings")
@@ -63,6 +71,20 @@ def write_solver(bench: Bench, config: dict, out: Path) -> ca.Function:
     The C comes with a header, ``main.c`` and a Makefile; the build makes the shared library and
     the replay program, and the compiled step is loaded back
     (:func:`hystmpc.mpc.codegen.write_step`).
+
+    Parameters
+    ----------
+    bench : Bench
+        The bench.
+    config : dict
+        Its parameter groups; the NMPC's solver is set to ``rti``.
+    out : Path
+        The folder to write into.
+
+    Returns
+    -------
+    casadi.Function
+        The compiled step.
     """
     config = _rti_config(bench, config, "rti")
     return write_step(_problem_of(bench.build_controller("nmpc", config)).rti, out)
@@ -75,6 +97,28 @@ def codegen(bench: Bench, config: dict, out: Path, verify: bool, duration: float
     With ``verify``, replay the default scenario closed loop with both solvers and run the
     standalone program on its inputs; with ``target='cortex-m7'``, also cross-compile the whole
     controller and report its size.
+
+    Parameters
+    ----------
+    bench : Bench
+        The bench.
+    config : dict
+        Its parameter groups.
+    out : Path
+        The folder to write into (the whole controller in ``<out>/controller``).
+    verify : bool
+        Also run the closed-loop and standalone comparisons.
+    duration : float, optional
+        Length of the verification run (s); default: the scenario's.
+    target : str, optional
+        ``cortex-m7`` or None.
+
+    Returns
+    -------
+    dict
+        The report: bench, folder, files written and the whole controller's report (or why it
+        was skipped); with ``verify``, also the scenario, the samples, the largest input
+        difference, both runs' RMSE and the standalone program's differences and timing.
     """
     if target not in (None, "cortex-m7"):
         raise ValueError(f"target {target!r} is unknown; allowed: cortex-m7")
@@ -122,7 +166,28 @@ def codegen(bench: Bench, config: dict, out: Path, verify: bool, duration: float
 
 
 def speed(bench: Bench, config: dict, variants, duration: float | None = None, out: Path | None = None) -> dict:
-    """``hystmpc speed``: per-step compute of each solver variant on the default scenario."""
+    """``hystmpc speed``: per-step compute of each solver variant on the default scenario.
+
+    Parameters
+    ----------
+    bench : Bench
+        The bench.
+    config : dict
+        Its parameter groups.
+    variants : iterable of str
+        NMPC solver names to time; with ``rti-c`` and ``out``, the generated C is also
+        built, verified and timed (:func:`codegen`).
+    duration : float, optional
+        Length of each run (s); default: the scenario's.
+    out : Path, optional
+        Folder for the generated C.
+
+    Returns
+    -------
+    dict
+        Bench, scenario, sample period (ms) and per variant its RMSE, step and solve timing,
+        failures and wall time; ``standalone_c`` and ``controller_c`` for the generated C.
+    """
     scenario = bench.scenarios[bench.default_scenario]
     period_ms = 1e3 * bench.sample_period
     rows = []
@@ -147,7 +212,18 @@ def speed(bench: Bench, config: dict, variants, duration: float | None = None, o
 
 
 def speed_table(result: dict) -> str:
-    """Markdown table of :func:`speed`'s result."""
+    """Markdown table of :func:`speed`'s result.
+
+    Parameters
+    ----------
+    result : dict
+        What :func:`speed` returned.
+
+    Returns
+    -------
+    str
+        A title line, then the table.
+    """
     period = result["sample_period_ms"]
     lines = [f"{result['bench']} · {result['scenario']} · sample period {period:g} ms", "",
              "| variant | RMSE | step ms median / p95 / max | solve ms median / p95 / max "

@@ -20,6 +20,19 @@ def load_reference(path: str | Path, bench: Bench) -> Scenario:
     Raises ``ValueError`` for a missing file or column, non-numeric, NaN or infinite values,
     a time column that does not start at 0 or is not strictly increasing, fewer than two
     rows, or values outside the bench's output range.
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file, with a header.
+    bench : Bench
+        The bench the reference is for (its output name, range and units).
+
+    Returns
+    -------
+    Scenario
+        Named after the file's stem, lasting until the last ``t``, the reference linearly
+        interpolated between the rows.
     """
     path = Path(path)
     header = _header(path, "reference file")
@@ -60,7 +73,24 @@ def read_columns(path: str | Path, columns: tuple[str, ...], what: str, minimum_
 
     ``ValueError`` naming the file (as ``what``) for a missing or unreadable file or
     column, a row whose field count differs from the header's, a non-numeric or missing
-    value (with its line), NaN or infinite values, or fewer than ``minimum_rows``.
+    value (with its line), NaN or infinite values, or fewer than ``minimum_rows``. Blank rows
+    are skipped.
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file.
+    columns : tuple of str
+        Names of the columns to read, in the array's order.
+    what : str
+        What the file is, for the error messages.
+    minimum_rows : int, optional
+        Fewest data rows accepted.
+
+    Returns
+    -------
+    ndarray
+        Shape ``(rows, len(columns))``.
     """
     path = Path(path)
     header = _header(path, what)
@@ -110,6 +140,20 @@ def load_record(path: str | Path, what: str = "data file") -> tuple[np.ndarray, 
     ``ValueError`` as :func:`read_columns`, and for a time column that is not strictly
     increasing or not uniformly sampled (to 1e-6 of the period), fewer than
     :data:`~hystmpc.models.identification.MIN_SAMPLES` rows or a constant input.
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file.
+    what : str, optional
+        What the file is, for the error messages.
+
+    Returns
+    -------
+    u, y : ndarray
+        Input and output samples, as checked by ``hystmpc.models.identification.check_data``.
+    sample_period : float
+        The median step of ``t`` (s).
     """
     from hystmpc.models.identification import MIN_SAMPLES, check_data
     data = read_columns(path, ("t", "u", "y"), what, minimum_rows=MIN_SAMPLES)

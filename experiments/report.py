@@ -17,7 +17,13 @@ SCHEMA = "hystmpc.results/1"
 
 
 def version() -> str:
-    """Installed hystmpc version (or ``0+unknown`` when running from a bare checkout)."""
+    """Installed hystmpc version (or ``0+unknown`` when running from a bare checkout).
+
+    Returns
+    -------
+    str
+        The version string.
+    """
     from importlib.metadata import PackageNotFoundError
     from importlib.metadata import version as _version
     try:
@@ -34,6 +40,12 @@ def environment() -> dict[str, str]:
     """What else made a result: Python, the numerical libraries' versions and the CPU architecture.
 
     The same command can differ in its last digits across these.
+
+    Returns
+    -------
+    dict
+        ``python``, ``machine`` and each of :data:`ENVIRONMENT_PACKAGES` to its version
+        (``not installed`` when missing).
     """
     import platform
     from importlib.metadata import PackageNotFoundError
@@ -48,7 +60,23 @@ def environment() -> dict[str, str]:
 
 
 def results_document(bench: str, runs: list[RunResult], command: list[str] | None = None) -> dict:
-    """The full result document (``hystmpc.results/1``) for a list of runs on bench ``bench``."""
+    """The full result document (``hystmpc.results/1``) for a list of runs on bench ``bench``.
+
+    Parameters
+    ----------
+    bench : str
+        Name of the bench.
+    runs : list of RunResult
+        The runs, in the document's order.
+    command : list of str, optional
+        The command line that made the runs, stored as ``command`` when given.
+
+    Returns
+    -------
+    dict
+        The document (strict JSON, :func:`json_safe`), stamped with its UTC creation time, the
+        hystmpc version and the :func:`environment`.
+    """
     doc = {"schema": SCHEMA, "bench": bench,
            "created": dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
            "version": version(), "environment": environment(), "runs": [r.to_json() for r in runs]}
@@ -58,7 +86,19 @@ def results_document(bench: str, runs: list[RunResult], command: list[str] | Non
 
 
 def json_safe(obj):
-    """Replace NaN/inf by None so the document is strict JSON."""
+    """Replace NaN/inf by None so the document is strict JSON.
+
+    Parameters
+    ----------
+    obj : object
+        A value, walked through dicts, lists and tuples.
+
+    Returns
+    -------
+    object
+        A copy with non-finite floats as None, tuples as lists and NumPy scalars as Python
+        ``float``/``int``.
+    """
     if isinstance(obj, dict):
         return {k: json_safe(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
@@ -71,7 +111,13 @@ def json_safe(obj):
 
 
 def validate_document(doc: dict) -> None:
-    """Check the keys and types interface.md promises; ``ValueError`` on the first problem."""
+    """Check the keys and types interface.md promises; ``ValueError`` on the first problem.
+
+    Parameters
+    ----------
+    doc : dict
+        A result document, as read from JSON.
+    """
     for key, kind in (("schema", str), ("bench", str), ("created", str), ("version", str), ("runs", list)):
         if not isinstance(doc.get(key), kind):
             raise ValueError(f"results document: {key!r} missing or not {kind.__name__}")
@@ -98,14 +144,38 @@ def validate_document(doc: dict) -> None:
 
 
 def write_json(doc: dict, path: str | Path) -> None:
-    """Write a document as indented strict JSON, creating the folder."""
+    """Write a document as indented strict JSON, creating the folder.
+
+    Parameters
+    ----------
+    doc : dict
+        The document (strict JSON: no NaN or inf, see :func:`json_safe`).
+    path : str or Path
+        The file to write.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
 
 
 def write_run_csv(run: RunResult, folder: str | Path) -> Path:
-    """``runs/<scenario>__<controller>.csv`` with t, reference, output, input, predicted."""
+    """``runs/<scenario>__<controller>.csv`` with t, reference, output, input, predicted.
+
+    One more column ``true_<key>`` per truth signal of the run; 9 significant digits, a
+    non-finite value as an empty cell.
+
+    Parameters
+    ----------
+    run : RunResult
+        The run to write.
+    folder : str or Path
+        The folder the ``runs`` subfolder is made in.
+
+    Returns
+    -------
+    Path
+        The written file.
+    """
     folder = Path(folder) / "runs"
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{run.scenario}__{run.controller}.csv"
@@ -163,6 +233,16 @@ def comparison_table(runs: list[RunResult]) -> str:
     total variation, the longest output oscillation (cycles, with its frequency when it is
     flagged), the step time against the sample period; a ``guard clips`` column when the
     plant guard changed any input.
+
+    Parameters
+    ----------
+    runs : list of RunResult
+        The runs, one row each in this order (units from the first).
+
+    Returns
+    -------
+    str
+        The Markdown table.
     """
     stepped = any("overshoot_pct" in r.metrics for r in runs)
     papers = any(r.paper and "rmse" in r.paper for r in runs)

@@ -37,7 +37,20 @@ class Controller(Protocol):
         """Forget every past sample: the next ``step`` is a run's first."""
 
     def step(self, measurement: Measurement, ref_window: np.ndarray) -> float:
-        """The input for this sample, from its measurement and ``horizon + 1`` reference samples."""
+        """The input for this sample, from its measurement and ``horizon + 1`` reference samples.
+
+        Parameters
+        ----------
+        measurement : Measurement
+            This sample's sensors.
+        ref_window : ndarray
+            The reference at this sample and the next ``horizon`` ones.
+
+        Returns
+        -------
+        float
+            The input to apply.
+        """
 
     def stats(self) -> dict | None:
         """Solver statistics of the run so far for the result (None: the controller solves nothing)."""
@@ -125,6 +138,11 @@ class RunResult:
         """One line: the median and p95 step against the sample period.
 
         It also says whether the controller keeps up with it on this machine (judged on the median).
+
+        Returns
+        -------
+        str
+            The line, without a newline.
         """
         t = self.timing
         if not t["real_time"]:
@@ -138,7 +156,14 @@ class RunResult:
                 f"p95 {t['step_ms_p95']:.3g} ms ({t['p95_share_of_period']:.0%}): {verdict}")
 
     def to_json(self) -> dict[str, Any]:
-        """The run as an element of a result document's ``runs`` (interface.md), strict JSON."""
+        """The run as an element of a result document's ``runs`` (interface.md), strict JSON.
+
+        Returns
+        -------
+        dict
+            Scenario, controller, seed, units, sample period, metrics, timing and parameters, with
+            ``solver``, ``guard`` and ``paper`` where the run has them.
+        """
         entry: dict[str, Any] = {
             "scenario": self.scenario, "controller": self.controller, "seed": self.seed, "units": self.units,
             "sample_period_s": self.sample_period, "metrics": self.metrics, "timing": self.timing,
@@ -157,8 +182,17 @@ class RunResult:
     def plot(self, path: str | Path | None = None, others: list[RunResult] = ()):
         """The figure ``compare`` draws for a scenario: tracking, error, input, hysteresis loop.
 
-        ``others`` are more runs on the same reference. Saved to ``path`` if given (returns
-        the path), else returned as a matplotlib Figure.
+        Parameters
+        ----------
+        path : str or Path, optional
+            Where to save the figure (default: do not save).
+        others : list of RunResult, optional
+            More runs on the same reference, drawn with this one.
+
+        Returns
+        -------
+        Path or matplotlib.figure.Figure
+            The path when saved, else the figure.
         """
         from hystmpc.experiments.plots import scenario_figure  # here: matplotlib loads only when a figure is drawn
         return scenario_figure([self, *others], path)
@@ -187,7 +221,20 @@ class InputGuard:
                              f"{self.rate}")
 
     def apply(self, u: float, last: float | None) -> tuple[float, bool, bool]:
-        """``(applied input, clipped, non_finite)`` for the requested ``u`` after ``last``."""
+        """``(applied input, clipped, non_finite)`` for the requested ``u`` after ``last``.
+
+        Parameters
+        ----------
+        u : float
+            The input the controller asks for.
+        last : float or None
+            The last applied input (None at the first sample).
+
+        Returns
+        -------
+        tuple of (float, bool, bool)
+            The input to apply, whether it differs from ``u``, whether ``u`` was not a number.
+        """
         if not np.isfinite(u):
             held = float(np.clip(self.rest, self.lower, self.upper)) if last is None else last
             return held, True, True
@@ -199,15 +246,35 @@ class InputGuard:
         return applied, abs(applied - u) > 1e-12 * max(1.0, abs(u)), False
 
     def describe(self) -> dict[str, float]:
-        """The bounds, for a run's result."""
+        """The bounds, for a run's result.
+
+        Returns
+        -------
+        dict
+            ``lower``, ``upper`` and ``rate``.
+        """
         return {"lower": self.lower, "upper": self.upper, "rate": self.rate}
 
 
 def reference_samples(reference, dt: float, duration: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Sample times and reference values at period ``dt``.
 
-    ``reference`` is a :class:`Scenario`, a function of time (then ``duration`` is needed)
-    or an array of samples at ``dt`` (``duration`` may shorten it).
+    Parameters
+    ----------
+    reference : Scenario, callable or array_like
+        A scenario, a function of time (then ``duration`` is needed) or an array of samples
+        at ``dt``.
+    dt : float
+        Sample period (s).
+    duration : float, optional
+        Length (s); default: the scenario's or the array's (for an array it may only shorten it).
+
+    Returns
+    -------
+    t : ndarray
+        Sample times (s), ``dt * arange(n)``.
+    values : ndarray
+        The reference at those times.
     """
     if isinstance(reference, Scenario):
         duration = reference.duration if duration is None else duration
@@ -258,6 +325,12 @@ def simulate(plant: Plant, controller: Controller, reference, duration: float | 
         The actuator's physical input limits; every input passes through it before
         ``plant.step`` (default: only finiteness is enforced, a non-finite input holds the
         last one). The result's ``input`` is the applied input.
+
+    Returns
+    -------
+    RunResult
+        The trajectories, with tracking, step (for a stepped reference), oscillation and input
+        metrics, the solver's statistics and what the guard did.
     """
     dt = plant.sample_period
     t, ref = reference_samples(reference, dt, duration)

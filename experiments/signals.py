@@ -6,7 +6,20 @@ import numpy as np
 
 
 def smooth_path(waypoints, segment: float):
-    """Raised-cosine moves through ``waypoints``, ``segment`` seconds each."""
+    """Raised-cosine moves through ``waypoints``, ``segment`` seconds each.
+
+    Parameters
+    ----------
+    waypoints : array_like
+        The levels passed through, the last one held.
+    segment : float
+        Duration of each move (s).
+
+    Returns
+    -------
+    callable
+        The reference as a vectorised function of time (s).
+    """
     waypoints = np.asarray(waypoints, float)
 
     def reference(t):
@@ -18,7 +31,20 @@ def smooth_path(waypoints, segment: float):
 
 
 def staircase(levels, dwell: float):
-    """Constant ``levels``, ``dwell`` seconds each (the last one held)."""
+    """Constant ``levels``, ``dwell`` seconds each (the last one held).
+
+    Parameters
+    ----------
+    levels : array_like
+        The levels, in order.
+    dwell : float
+        Time at each level (s).
+
+    Returns
+    -------
+    callable
+        The reference as a vectorised function of time (s).
+    """
     levels = np.asarray(levels, float)
 
     def reference(t):
@@ -28,7 +54,20 @@ def staircase(levels, dwell: float):
 
 
 def after_approach(core, approach: float):
-    """``core(t − approach)`` after a raised-cosine approach from 0 to ``core(0)`` lasting ``approach`` s."""
+    """``core(t − approach)`` after a raised-cosine approach from 0 to ``core(0)`` lasting ``approach`` s.
+
+    Parameters
+    ----------
+    core : callable
+        The reference after the approach, a vectorised function of time (s).
+    approach : float
+        Duration of the approach (s).
+
+    Returns
+    -------
+    callable
+        The reference as a vectorised function of time (s).
+    """
     start = float(core(np.zeros(1))[0])
 
     def reference(t):
@@ -39,7 +78,20 @@ def after_approach(core, approach: float):
 
 
 def triangle_wave(mean: float, amplitude: float, period: float):
-    """A triangle ``mean ± amplitude`` starting at the mean, rising."""
+    """A triangle ``mean ± amplitude`` starting at the mean, rising.
+
+    Parameters
+    ----------
+    mean, amplitude : float
+        Centre and half the peak-to-peak swing.
+    period : float
+        Period (s).
+
+    Returns
+    -------
+    callable
+        The reference as a vectorised function of time (s).
+    """
     def reference(t):
         phase = np.mod(np.asarray(t, float) / period + 0.25, 1.0)
         return mean - amplitude * (4 * np.abs(phase - 0.5) - 1)
@@ -47,7 +99,20 @@ def triangle_wave(mean: float, amplitude: float, period: float):
 
 
 def square_wave(mean: float, amplitude: float, period: float):
-    """A square wave ``mean ± amplitude``, high for the first half of each period."""
+    """A square wave ``mean ± amplitude``, high for the first half of each period.
+
+    Parameters
+    ----------
+    mean, amplitude : float
+        Centre and half the peak-to-peak swing.
+    period : float
+        Period (s).
+
+    Returns
+    -------
+    callable
+        The reference as a vectorised function of time (s).
+    """
     def reference(t):
         return mean + amplitude * np.where(np.mod(np.asarray(t, float), period) < period / 2, 1.0, -1.0)
     return reference

@@ -51,13 +51,39 @@ class RunTask:
 
 
 def perturbation_factors(spec: SweepSpec, sample: int) -> dict[str, float]:
-    """Relative factors of perturbation sample ``sample`` (seeded by ``perturb_seed`` and ``sample``)."""
+    """Relative factors of perturbation sample ``sample`` (seeded by ``perturb_seed`` and ``sample``).
+
+    Parameters
+    ----------
+    spec : SweepSpec
+        The sweep (its ``perturb`` amplitudes and ``perturb_seed``).
+    sample : int
+        The perturbation sample.
+
+    Returns
+    -------
+    dict
+        Per parameter key, a factor drawn from U(1 − a, 1 + a).
+    """
     rng = np.random.default_rng([spec.perturb_seed, sample])
     return {key: float(1.0 + rng.uniform(-a, a)) for key, a in spec.perturb.items()}
 
 
 def scaled_assignments(config: dict[str, Any], factors: dict[str, float]) -> list[str]:
-    """``KEY=VALUE`` assignments scaling each parameter by its factor (tuples element-wise)."""
+    """``KEY=VALUE`` assignments scaling each parameter by its factor (tuples element-wise).
+
+    Parameters
+    ----------
+    config : dict
+        The configuration the values are read from.
+    factors : dict
+        Factor per parameter key (:func:`perturbation_factors`).
+
+    Returns
+    -------
+    list of str
+        One assignment per key.
+    """
     from hystmpc.experiments.config import get_value
     assignments = []
     for key, factor in factors.items():
@@ -70,7 +96,18 @@ def scaled_assignments(config: dict[str, Any], factors: dict[str, float]) -> lis
 
 
 def make_tasks(spec: SweepSpec) -> list[RunTask]:
-    """Every run of the sweep, in a fixed order."""
+    """Every run of the sweep, in a fixed order.
+
+    Parameters
+    ----------
+    spec : SweepSpec
+        The sweep.
+
+    Returns
+    -------
+    list of RunTask
+        Per perturbation sample, scenario, seed and controller, in that nesting.
+    """
     from hystmpc.experiments.benches import get_bench
     base = get_bench(spec.bench).configure(spec.overrides)
     tasks = []
@@ -86,7 +123,19 @@ def make_tasks(spec: SweepSpec) -> list[RunTask]:
 
 
 def execute(task: RunTask) -> dict[str, Any]:
-    """Run one task and return its record; an exception inside the run becomes an ``error`` record."""
+    """Run one task and return its record; an exception inside the run becomes an ``error`` record.
+
+    Parameters
+    ----------
+    task : RunTask
+        The run.
+
+    Returns
+    -------
+    dict
+        The record (JSON-safe): the task, ``status``, the metrics, timing and guard (or the
+        error and its traceback), ``elapsed_s`` and the solver warnings it printed.
+    """
     from hystmpc.experiments.benches import get_bench
     from hystmpc.experiments.report import json_safe, version
     record: dict[str, Any] = {
@@ -115,7 +164,20 @@ def execute(task: RunTask) -> dict[str, Any]:
 
 
 def write_record(record: dict[str, Any], folder: Path) -> Path:
-    """Write a record atomically: a temporary file in the same folder, flushed, then renamed."""
+    """Write a record atomically: a temporary file in the same folder, flushed, then renamed.
+
+    Parameters
+    ----------
+    record : dict
+        The record (:func:`execute`).
+    folder : Path
+        The records folder (made if missing).
+
+    Returns
+    -------
+    Path
+        ``folder/<run id>.json``.
+    """
     folder.mkdir(parents=True, exist_ok=True)
     final = folder / f"{record['run_id']}.json"
     tmp = folder / f".{record['run_id']}.json.tmp"
@@ -156,9 +218,22 @@ def read_records(folder: Path, expected: set[str] | None = None,
                  set_aside: Path | None = None) -> dict[str, dict[str, Any]]:
     """Usable records by run id (leftover temporary files of a killed sweep are removed).
 
-    A record that does not parse, lacks a field, or (with ``expected``, the spec's run ids)
-    belongs to no run of the spec is not used; with ``set_aside`` it is moved there, with
-    a warning, so that its run is redone and nothing is deleted.
+    A record that does not parse, lacks a field, or belongs to no run of the spec is not used.
+
+    Parameters
+    ----------
+    folder : Path
+        The records folder (none: no records).
+    expected : set of str, optional
+        The spec's run ids (default: any run id).
+    set_aside : Path, optional
+        Where unusable records are moved, with a warning, so that their runs are redone and
+        nothing is deleted (default: they stay).
+
+    Returns
+    -------
+    dict
+        Record per run id.
     """
     import logging
     records = {}
@@ -248,15 +323,26 @@ def run_sweep(spec: SweepSpec, out: Path, workers: int | None = None, executor: 
         ``summary.md`` and figures.
     workers : int, optional
         Worker processes (default: the core count).
-    executor : {"local", "dask"}
+    executor : {"local", "dask"}, optional
         Local process pool, or ``dask.distributed``.
     scheduler : str, optional
         Address of a running Dask scheduler (with ``executor="dask"``); a ``LocalCluster`` otherwise.
-    resume : bool
+    resume : bool, optional
         Skip the runs ``out`` already holds; ``out`` must hold a sweep of the same spec.
         Records that cannot be used are moved to ``out/set-aside/`` and their runs redone.
-    retry_failed : bool
+    plots : bool, optional
+        Draw the figures.
+    quiet : bool, optional
+        No progress bar, and no line per finished run (written to stderr when it is not a terminal).
+    spec_text : str, optional
+        The spec's TOML text, written to ``out/spec.toml`` when the sweep starts.
+    retry_failed : bool, optional
         With ``resume``, also redo the runs recorded as errors.
+
+    Returns
+    -------
+    SweepOutcome
+        The folder, the summary, the runs made, skipped and failed, the wall time (s) and the figures.
     """
     from hystmpc.experiments.benches import get_bench
     from hystmpc.experiments.report import environment, version

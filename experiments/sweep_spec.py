@@ -45,7 +45,13 @@ class SweepSpec:
         return len(self.scenarios) * len(self.controllers) * len(self.seeds) * self.samples
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-ready form (stored beside the records, compared on resume)."""
+        """JSON-ready form (stored beside the records, compared on resume).
+
+        Returns
+        -------
+        dict
+            The fields, tuples as lists.
+        """
         d = asdict(self)
         for key in ("scenarios", "controllers", "seeds", "overrides"):
             d[key] = list(d[key])
@@ -79,13 +85,18 @@ def load_spec(path: str | Path, extra_overrides: Iterable[str] = (), duration: f
     ----------
     path : str or Path
         TOML file (format in interface.md).
-    extra_overrides : iterable of str
+    extra_overrides : iterable of str, optional
         ``KEY=VALUE`` assignments from the command line, applied after the spec's ``set``.
     duration : float, optional
         Run length (s) from the command line; replaces the spec's ``duration``.
-    force : bool
+    force : bool, optional
         Lift the work ceilings of :mod:`hystmpc.experiments.limits` (horizon, samples per
         run, runs and samples per sweep).
+
+    Returns
+    -------
+    SweepSpec
+        The checked spec; an actuator file as ``bench`` is made absolute.
 
     Raises
     ------
@@ -169,10 +180,7 @@ def load_spec(path: str | Path, extra_overrides: Iterable[str] = (), duration: f
         for name, n in per_scenario.items():
             check_run_samples(n, f"a run of {name}", force)
         check_horizons(config, force)
-        if "nmpc" in controllers:
-            from hystmpc.experiments.firmware import check_runtime
-            check_runtime(config)
-            config["nmpc"].check_combination(config.get("solver"))
+        bench.validate(config, controllers)
         check_sweep(spec.n_runs, sum(per_scenario.values()) * spec.n_runs // len(scenarios), force)
     except ValueError as exc:
         _fail(path, str(exc))
@@ -180,5 +188,20 @@ def load_spec(path: str | Path, extra_overrides: Iterable[str] = (), duration: f
 
 
 def run_id(scenario: str, controller: str, seed: int, sample: int) -> str:
-    """Name of a run's record: ``<scenario>__<controller>__s<seed>__p<sample>``."""
+    """Name of a run's record: ``<scenario>__<controller>__s<seed>__p<sample>``.
+
+    Parameters
+    ----------
+    scenario, controller : str
+        Names of the scenario and the controller.
+    seed : int
+        Seed of the run.
+    sample : int
+        Index of the perturbed plant.
+
+    Returns
+    -------
+    str
+        The id, ``<sample>`` zero-padded to four digits.
+    """
     return f"{scenario}__{controller}__s{seed}__p{sample:04d}"

@@ -37,6 +37,22 @@ def summarize(spec: SweepSpec, records: dict[str, dict[str, Any]], metric: str =
     controller. ``nmpc`` wins against a baseline in a case when its ``metric`` is strictly
     lower; a failed nmpc run loses the case, a case whose baseline failed is not compared.
     The result depends on the records only, not on the order they arrived in.
+
+    Parameters
+    ----------
+    spec : SweepSpec
+        The sweep.
+    records : dict
+        Run records by run id (:func:`~hystmpc.experiments.sweep_spec.run_id`).
+    metric : str, optional
+        The metric the win rates compare.
+
+    Returns
+    -------
+    dict
+        The summary document (``hystmpc.sweep-summary/1``): run counts, ``groups`` (one per
+        scenario and controller) and, when the sweep has ``nmpc`` and a baseline, ``win_rates``
+        over all scenarios (``all``) and per scenario.
     """
     groups = []
     for scenario in spec.scenarios:
@@ -98,7 +114,15 @@ def _win_rates(spec, records, metric, baselines, scenarios) -> dict[str, Any]:
 
 
 def write_summary_csv(summary: dict[str, Any], path: Path) -> None:
-    """One row per scenario and controller; ``nmpc_win_rate`` is nmpc's rate against that row's controller."""
+    """One row per scenario and controller; ``nmpc_win_rate`` is nmpc's rate against that row's controller.
+
+    Parameters
+    ----------
+    summary : dict
+        What :func:`summarize` returned.
+    path : Path
+        The CSV file to write.
+    """
     wins = summary.get("win_rates", {})
     with open(path, "w", newline="") as f:
         writer = csv.writer(f)
@@ -119,7 +143,20 @@ def _fmt(value) -> str:
 
 
 def summary_table(summary: dict[str, Any], units: str) -> str:
-    """Markdown table: per scenario and controller, RMSE quartiles, failures and nmpc's win rate."""
+    """Markdown table: per scenario and controller, RMSE quartiles, failures and nmpc's win rate.
+
+    Parameters
+    ----------
+    summary : dict
+        What :func:`summarize` returned.
+    units : str
+        Units of the output.
+
+    Returns
+    -------
+    str
+        The table.
+    """
     lines = [f"| scenario | controller | runs | failed | oscillating | RMSE median [{units}] | RMSE q1–q3 | "
              "input TV median | nmpc wins |",
              "|---|---|---:|---:|---:|---:|---|---:|---:|"]
@@ -144,7 +181,26 @@ def summary_table(summary: dict[str, Any], units: str) -> str:
 
 
 def sweep_figures(spec: SweepSpec, records: dict[str, dict[str, Any]], out: Path, units: str) -> list[Path]:
-    """Box plots of RMSE per controller (one panel per scenario) and nmpc against the best baseline."""
+    """Box plots of RMSE per controller (one panel per scenario) and nmpc against the best baseline.
+
+    Only successful runs are drawn; the second figure needs ``nmpc`` and a baseline in the sweep.
+
+    Parameters
+    ----------
+    spec : SweepSpec
+        The sweep.
+    records : dict
+        Run records by run id.
+    out : Path
+        The existing folder the PNG files are saved in.
+    units : str
+        Units of the output.
+
+    Returns
+    -------
+    list of Path
+        ``rmse_box.png`` and, if drawn, ``nmpc_vs_best_baseline.png``.
+    """
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -17,13 +17,24 @@ then a PID from the PI's optimum, and keeps the better.
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
+import json
 import logging
+import os
 from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from hystmpc.experiments.baselines import PidGains
+from hystmpc.experiments.baselines import FeedforwardPidGains, PidGains
+from hystmpc.experiments.report import version
 from hystmpc.experiments.runner import Scenario, simulate
+from hystmpc.mpc.codegen import user_cache_dir
+from hystmpc.mpc.linear_mpc import LinearMpcSettings
+
+if TYPE_CHECKING:  # an actuator file's spec is passed in; it imports this module
+    from hystmpc.experiments.actuator_file import ActuatorSpec
 
 LOG = logging.getLogger("hystmpc")
 RING_CYCLES = 3.0
@@ -36,8 +47,23 @@ def mean_rmse(controller, plants, scenarios: list[Scenario], reject_oscillating:
               ) -> float:
     """Mean RMSE of ``controller`` on ``scenarios`` against each of ``plants`` (one plant or a list).
 
-    It is inf if a run is not finite or, with ``reject_oscillating``, rings :data:`RING_CYCLES`
-    cycles or more.
+    Parameters
+    ----------
+    controller : Controller
+        The controller, reset before each run.
+    plants : Plant or list of Plant
+        One plant or the ensemble.
+    scenarios : list of Scenario
+        The references.
+    reject_oscillating : bool, optional
+        A run that rings :data:`RING_CYCLES` cycles or more makes the cost inf.
+    seed : int, optional
+        Seed of every run.
+
+    Returns
+    -------
+    float
+        The mean RMSE; inf if it is not finite or a run rings (with ``reject_oscillating``).
     """
     rmses = []
     for plant in plants if isinstance(plants, list | tuple) else [plants]:
@@ -51,7 +77,26 @@ def mean_rmse(controller, plants, scenarios: list[Scenario], reject_oscillating:
 
 
 def coarse_start(cost: Callable, static_gain: float, dead_time: float, sample_period: float):
-    """The best ``(log kp, log ki)`` of the coarse grid around the SIMC-style guess, and its cost."""
+    """The best ``(log kp, log ki)`` of the coarse grid around the SIMC-style guess, and its cost.
+
+    Parameters
+    ----------
+    cost : callable
+        Cost of ``(log kp, log ki)``.
+    static_gain : float
+        Output per input unit at low frequency (its magnitude is used).
+    dead_time : float
+        Dead time plus lag (s); at least ``sample_period`` is used.
+    sample_period : float
+        Sample period (s).
+
+    Returns
+    -------
+    z : ndarray
+        The best grid point ``(log kp, log ki)``.
+    cost : float
+        Its cost.
+    """
     k = max(abs(static_gain), 1e-12)
     theta = max(dead_time, sample_period)
     guess = np.log([0.2 / k, 1.0 / (2 * k * theta)])
@@ -80,11 +125,11 @@ def tune_pid(build: Callable[[PidGains], object], plant, scenarios: list[Scenari
         Dead time plus lag of the actuator (s), for the starting guess.
     sample_period : float
         Sample period (s); the derivative filter is three samples.
-    max_evaluations : int
+    max_evaluations : int, optional
         Cost evaluations per Nelder–Mead stage.
-    stages : tuple of str
+    stages : tuple of str, optional
         ``("pi",)`` stops after the PI stage.
-    reject_oscillating : bool
+    reject_oscillating : bool, optional
         A candidate that rings :data:`RING_CYCLES` cycles or more on any run is never chosen.
 
     Returns
@@ -126,3 +171,134 @@ def tune_pid(build: Callable[[PidGains], object], plant, scenarios: list[Scenari
         pid = minimize(cost, z_pid, method="Nelder-Mead", options=options | {"initial_simplex": simplex})
     best = pid if pid.fun < pi.fun else pi
     return gains_of(best.x), float(best.fun)
+
+
+TUNING_RULE = "mean-rmse-ensemble-rings-below-3/9"
+"""Names the tuning rule in the cache key: change it when the rule changes."""
+
+LMPC_RATE_FACTORS = (0.01, 0.1, 1.0, 10.0, 100.0, 1e3, 1e4)
+"""The rate weights ``inverse-lmpc``'s tuning tries, relative to the default (the NMPC's
+normalised rate weight, on the output span instead of the input span)."""
+
+TUNING_SEED = 1
+"""Sensor-noise seed of the tuning runs (the comparison's default is 0)."""
+
+
+def tuned_baselines(spec: ActuatorSpec, model, config: dict) -> dict[str, Any]:
+    """An actuator file's baselines tuned on its nominal model: PID, inverse-ff-pid, inverse-lmpc.
+
+    The PID gains come from :func:`tune_pid` on the tuning ensemble
+    (:meth:`~hystmpc.experiments.actuator_file.ActuatorSpec.tuning_ensemble`); ``inverse-ff-pid``
+    also gets its preview (of dead time + one sample + the block's lag and its two
+    neighbours, the one with the best point of the coarse grid), ``inverse-lmpc`` its rate
+    weight (the multiple of the default in :data:`LMPC_RATE_FACTORS` with the least mean RMSE
+    and no ringing run, on the ensemble with the file's sensor noise, seed
+    :data:`TUNING_SEED`). The result is cached on disk
+    (:func:`hystmpc.mpc.codegen.user_cache_dir`), keyed by everything it depends on.
+
+    Parameters
+    ----------
+    spec : ActuatorSpec
+        The actuator file.
+    model : ActuatorModel
+        The nominal ``model`` group.
+    config : dict
+        Parameter groups before tuning (``lmpc`` is read).
+
+    Returns
+    -------
+    dict
+        ``pid`` (PidGains), ``inverse_ff_pid`` (FeedforwardPidGains) and ``lmpc``
+        (LinearMpcSettings).
+    """
+    identity = json.dumps({"rule": TUNING_RULE, "version": version(), "model": dataclasses.asdict(model),
+                           "sample_period": spec.sample_period, "bounds": spec.input_bounds,
+                           "rate": str(spec.input_rate), "scenarios": [spec.sine_hz, spec.step_s, spec.duration_s],
+                           "output_range": spec.output_range, "noise": spec.noise,
+                           "lmpc": dataclasses.asdict(config["lmpc"]), "lmpc_factors": LMPC_RATE_FACTORS,
+                           "runner_up": spec.runner_up(),
+                           "runner_up_weight": spec.runner_up_weight() if spec.runner_up() else None},
+                          sort_keys=True, default=str)
+    path = user_cache_dir() / f"tuning-{hashlib.sha256(identity.encode()).hexdigest()[:20]}.json"
+    try:
+        stored = json.loads(path.read_text())
+        return {"pid": PidGains(**stored["pid"]), "inverse_ff_pid": FeedforwardPidGains(**stored["inverse_ff_pid"]),
+                "lmpc": LinearMpcSettings(**stored["lmpc"])}
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    LOG.info("tuning the baselines of %s on its nominal model%s (once; cached in %s)", spec.name,
+             " and the runner-up blend" if spec.runner_up() else "", path.parent)
+    tuned = _tune(spec, model, config)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        partial = path.with_suffix(f".{os.getpid()}.tmp")
+        partial.write_text(json.dumps({k: dataclasses.asdict(v) for k, v in tuned.items()}))
+        partial.replace(path)
+    except OSError as exc:  # a read-only home: tune again next time
+        LOG.info("could not cache the tuned gains (%s)", exc)
+    return tuned
+
+
+def _tune(spec: ActuatorSpec, model, config: dict) -> dict[str, Any]:
+    hysteresis, _ = spec.hysteresis(model)
+    state = hysteresis.initial_state(spec.input_bounds[0])
+    _, y_lo = hysteresis.step(state, spec.input_bounds[0])
+    _, y_hi = hysteresis.step(state, spec.input_bounds[1])
+    gain = (y_hi - y_lo) / (spec.input_bounds[1] - spec.input_bounds[0])
+    dead = (model.dynamics.delay_samples + 1) * spec.sample_period + model.dynamics.lag()
+    plants = spec.tuning_ensemble(model, 0.0)
+    scenarios = list(spec.scenarios().values())
+    pid = tune_pid(lambda g: spec.build_pid(config | {"model": model}, False, g), plants, scenarios,
+                   gain, dead, spec.sample_period)[0]
+    rule = model.dynamics.delay_samples + 1 + int(round(model.dynamics.lag() / spec.sample_period))
+
+    def feedforward(preview):
+        return lambda g: spec.build_pid(config | {"model": model}, True,
+                                        FeedforwardPidGains(**dataclasses.asdict(g), preview=preview))
+
+    def coarse(preview, reject=True):
+        def cost(z):
+            gains = PidGains(kp=float(np.exp(z[0])), ki=float(np.exp(z[1])),
+                             derivative_filter=3 * spec.sample_period)
+            return mean_rmse(feedforward(preview)(gains), plants, scenarios, reject)
+        return coarse_start(cost, gain, dead, spec.sample_period)[1]
+    previews = (rule - 1, rule, rule + 1)
+    costs = {p: coarse(p) for p in previews}
+    if not np.isfinite(min(costs.values())):  # every point rings at every preview: RMSE alone decides
+        costs = {p: coarse(p, False) for p in previews}
+    preview = min(previews, key=costs.get)
+    gains = tune_pid(feedforward(preview), plants, scenarios, gain, dead, spec.sample_period)[0]
+    return {"pid": pid, "inverse_ff_pid": FeedforwardPidGains(**dataclasses.asdict(gains), preview=preview),
+            "lmpc": _tune_lmpc(spec, model, config, scenarios)}
+
+
+def _tune_lmpc(spec: ActuatorSpec, model, config: dict, scenarios: list[Scenario]) -> LinearMpcSettings:
+    """``inverse-lmpc``'s rate weight, chosen among multiples of the default by mean RMSE.
+
+    Of the default times each of :data:`LMPC_RATE_FACTORS`, it is the one with the least mean
+    RMSE over ``scenarios`` on the tuning ensemble (:meth:`tuning_ensemble`) with no run that
+    rings (:data:`~hystmpc.experiments.tuning.RING_CYCLES`; when every one does, the least mean
+    RMSE, with a warning), with the file's sensor noise (the noise sets how fast it may act),
+    drawn with another seed than the comparison's.
+    """
+    plants = spec.tuning_ensemble(model, spec.noise)
+    base: LinearMpcSettings = config["lmpc"]
+    tried = []
+    for factor in LMPC_RATE_FACTORS:
+        settings = dataclasses.replace(base, r_rate=base.r_rate * factor)
+        controller = spec.build_inverse_lmpc(config | {"model": model}, settings)
+        clean = mean_rmse(controller, plants, scenarios, seed=TUNING_SEED)
+        any_run = clean if np.isfinite(clean) else mean_rmse(controller, plants, scenarios, False, TUNING_SEED)
+        tried.append((clean, any_run, factor, settings))
+    clean, any_run, factor, best = min(tried, key=lambda row: row[:2])
+    if not np.isfinite(any_run):
+        LOG.warning("inverse-lmpc: every rate weight tried failed; it keeps the default %.4g (set lmpc.r_rate)",
+                    base.r_rate)
+        return base
+    if not np.isfinite(clean):
+        LOG.warning("inverse-lmpc: every rate weight tried rings on the tuning ensemble; it takes the one "
+                    "with the least mean RMSE, %.4g (set lmpc.r_rate)", best.r_rate)
+    elif factor in (LMPC_RATE_FACTORS[0], LMPC_RATE_FACTORS[-1]):
+        LOG.warning("inverse-lmpc: the tuned rate weight %.4g is at the edge of the grid tried; a better one may "
+                    "lie beyond (set lmpc.r_rate)", best.r_rate)
+    return best

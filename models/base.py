@@ -40,19 +40,85 @@ class HysteresisModel(Protocol):
         """One name per state entry; the first is the last input."""
 
     def initial_state(self, u0: float = 0.0) -> np.ndarray:
-        """A relaxed (demagnetised) state at input ``u0``."""
+        """A relaxed (demagnetised) state at input ``u0``.
+
+        Parameters
+        ----------
+        u0 : float, optional
+            Input the state rests at.
+
+        Returns
+        -------
+        ndarray
+            The state, one entry per ``state_names``.
+        """
 
     def output(self, state):
-        """Output of a state: a float for a NumPy state, an expression for a CasADi one."""
+        """Output of a state: a float for a NumPy state, an expression for a CasADi one.
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            A state.
+
+        Returns
+        -------
+        float or CasADi expression
+            The output at ``state``.
+        """
 
     def step(self, state, u: float) -> tuple[np.ndarray, float]:
-        """Exact step to input ``u``: ``(state_next, y)``."""
+        """Exact step to input ``u``: ``(state_next, y)``.
+
+        Parameters
+        ----------
+        state : ndarray
+            State before the step.
+        u : float
+            New input.
+
+        Returns
+        -------
+        state_next : ndarray
+            State after the step.
+        y : float
+            Output after the step.
+        """
 
     def smooth_step(self, eps: float, direction_eps: float | None = None) -> ca.Function:
-        """Smooth step ``(state, u) -> (state_next, y)`` as a CasADi Function."""
+        """Smooth step ``(state, u) -> (state_next, y)`` as a CasADi Function.
+
+        Parameters
+        ----------
+        eps : float
+            Width of the smooth blends, > 0.
+        direction_eps : float, optional
+            Width of the input-direction detection, for models that have one (a model
+            without raises ``ValueError`` when given one).
+
+        Returns
+        -------
+        casadi.Function
+            ``(state, u) -> (state_next, y)``.
+        """
 
     def inverse_step(self, state, y_target: float) -> tuple[np.ndarray, float]:
-        """Input that moves the output to ``y_target``, and the state after it: ``(state, u)``."""
+        """Input that moves the output to ``y_target``, and the state after it: ``(state, u)``.
+
+        Parameters
+        ----------
+        state : ndarray
+            State to move from.
+        y_target : float
+            Output to reach.
+
+        Returns
+        -------
+        state : ndarray
+            State after the move.
+        u : float
+            The input.
+        """
 
 
 class SteppedModel:
@@ -66,7 +132,19 @@ class SteppedModel:
     def simulate(self, inputs, state=None) -> tuple[np.ndarray, np.ndarray]:
         """Exact response to an input sequence; returns ``(outputs, final_state)``.
 
-        Starts from ``initial_state(inputs[0])`` unless ``state`` is given.
+        Parameters
+        ----------
+        inputs : array_like
+            Input at each sample.
+        state : array_like, optional
+            Initial state (default: ``initial_state(inputs[0])``).
+
+        Returns
+        -------
+        outputs : ndarray
+            Output after each input.
+        final_state : ndarray
+            State after the last input.
         """
         state = self.initial_state(inputs[0]) if state is None else np.asarray(state, float)
         out = np.empty(len(inputs))
@@ -76,7 +154,18 @@ class SteppedModel:
 
 
 def symbolic(value) -> bool:
-    """Whether ``value`` is a CasADi expression (``output`` methods then return one too)."""
+    """Whether ``value`` is a CasADi expression (``output`` methods then return one too).
+
+    Parameters
+    ----------
+    value : object
+        A NumPy or CasADi value.
+
+    Returns
+    -------
+    bool
+        True for ``casadi.SX`` and ``casadi.MX`` (a ``casadi.DM`` is a number, not an expression).
+    """
     return isinstance(value, (ca.SX, ca.MX))
 
 
@@ -85,6 +174,18 @@ def clip(value, lower, upper):
 
     Unlike with ``fmin``/``fmax``, which would return a bound, code generated from a model thus
     fails where the NumPy model does.
+
+    Parameters
+    ----------
+    value : CasADi expression
+        Value to clip (elementwise).
+    lower, upper : float, casadi.DM or CasADi expression
+        Bounds.
+
+    Returns
+    -------
+    CasADi expression
+        ``value`` held within ``[lower, upper]``.
     """
     return ca.if_else(value < lower, lower, ca.if_else(value > upper, upper, value))
 
@@ -94,6 +195,20 @@ def interp(x, xp, fp):
 
     For a CasADi ``x`` the formula (the segment's slope times the distance from its left point,
     plus that point's value; the end values held outside) is built as nested ``if_else``.
+
+    Parameters
+    ----------
+    x : float, ndarray or CasADi expression
+        Where to interpolate.
+    xp : array_like
+        Increasing abscissae.
+    fp : array_like
+        Values at ``xp``.
+
+    Returns
+    -------
+    float, ndarray or CasADi expression
+        The interpolated value(s), a CasADi expression for a CasADi ``x``.
     """
     if not symbolic(x):
         return np.interp(x, xp, fp)
@@ -106,12 +221,34 @@ def interp(x, xp, fp):
 
 
 def builtin_max(a, b):
-    """Python's ``max(a, b)`` on CasADi expressions: ``a`` unless ``b > a`` (NaN included)."""
+    """Python's ``max(a, b)`` on CasADi expressions: ``a`` unless ``b > a`` (NaN included).
+
+    Parameters
+    ----------
+    a, b : float or CasADi expression
+        The two values.
+
+    Returns
+    -------
+    CasADi expression
+        The larger.
+    """
     return ca.if_else(b > a, b, a)
 
 
 def builtin_min(a, b):
-    """Python's ``min(a, b)`` on CasADi expressions: ``a`` unless ``b < a`` (NaN included)."""
+    """Python's ``min(a, b)`` on CasADi expressions: ``a`` unless ``b < a`` (NaN included).
+
+    Parameters
+    ----------
+    a, b : float or CasADi expression
+        The two values.
+
+    Returns
+    -------
+    CasADi expression
+        The smaller.
+    """
     return ca.if_else(b < a, b, a)
 
 
@@ -120,6 +257,20 @@ def smooth_function(name: str, n_state: int, expressions) -> ca.Function:
 
     Every model's ``smooth_step`` returns its Function through this, so all share the
     input and output names ``state``, ``u``, ``state_next``, ``y``.
+
+    Parameters
+    ----------
+    name : str
+        Name of the Function.
+    n_state : int
+        Length of the state.
+    expressions : callable
+        ``(state, u) -> (state_next, y)`` on SX symbols.
+
+    Returns
+    -------
+    casadi.Function
+        ``(state, u) -> (state_next, y)``.
     """
     state = ca.SX.sym("state", n_state)
     u = ca.SX.sym("u")
@@ -128,7 +279,17 @@ def smooth_function(name: str, n_state: int, expressions) -> ca.Function:
 
 
 def check_smoothing(eps: float, direction_eps: float | None = None, has_direction: bool = True) -> None:
-    """``ValueError`` unless ``eps > 0`` and ``direction_eps`` is None or > 0 (and allowed)."""
+    """``ValueError`` unless ``eps > 0`` and ``direction_eps`` is None or > 0 (and allowed).
+
+    Parameters
+    ----------
+    eps : float
+        Smoothing width; must be finite.
+    direction_eps : float, optional
+        Width of the direction detection; None: unset.
+    has_direction : bool, optional
+        Whether the model detects the input's direction; without, ``direction_eps`` must be None.
+    """
     if not (np.isfinite(eps) and eps > 0):
         raise ValueError(f"eps must be finite and > 0, got {eps}")
     if direction_eps is None:
@@ -146,11 +307,35 @@ def bisection_inverse(model, state, y_target, edges: tuple[float, float], reach:
     On CasADi expressions (the arithmetic of a generated controller); returns ``(state, u)``.
 
     For models whose output moves monotonically with the input along a monotone move, and
-    linearly (``tail_slopes``: downwards, upwards) once the move has gone ``reach`` and past
-    ``edges``. ``iterations`` halvings of the move up to that far bound find the input where the
+    linearly (``tail_slopes``) once the move has gone ``reach`` and past ``edges``.
+    ``iterations`` halvings of the move up to that far bound find the input where the
     target is first reached, to ``2^-iterations`` of the move; beyond it the line is followed,
     and a target a flat tail cannot reach gives the far bound. The halvings run as a CasADi
     fold: generated C keeps one loop, not ``iterations`` copies.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+        Its ``step`` and ``output`` must accept CasADi expressions.
+    state : array_like or CasADi expression
+        State to move from.
+    y_target : float or CasADi expression
+        Output to reach.
+    edges : tuple of float
+        Inputs (downwards, upwards) past which the output is linear (input units).
+    reach : float
+        Input move after which the output is linear (input units).
+    tail_slopes : tuple of float, optional
+        Output slopes beyond the far bound: downwards, upwards (0: flat).
+    iterations : int, optional
+        Number of halvings.
+
+    Returns
+    -------
+    state : CasADi expression
+        State after the move (``casadi.DM`` for numeric arguments).
+    u : CasADi expression
+        The input (``casadi.DM`` for numeric arguments).
     """
     n = len(model.state_names)
     x, target, up = ca.SX.sym("state", n), ca.SX.sym("target"), ca.SX.sym("up")

@@ -65,11 +65,33 @@ class BoucWen(SteppedModel):
         return ("u_last", "zeta")
 
     def initial_state(self, u0: float = 0.0) -> np.ndarray:
-        """Relaxed at ``u0``: ``ζ = 0``."""
+        """Relaxed at ``u0``: ``ζ = 0``.
+
+        Parameters
+        ----------
+        u0 : float, optional
+            Input the state rests at.
+
+        Returns
+        -------
+        ndarray
+            ``[u0, 0]``.
+        """
         return np.array([float(u0), 0.0])
 
     def output(self, state):
-        """``k·u_last + A·ζ`` (NumPy or CasADi)."""
+        """``k·u_last + A·ζ`` (NumPy or CasADi).
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            A state.
+
+        Returns
+        -------
+        float or CasADi expression
+            The output at ``state``.
+        """
         if symbolic(state):
             return self.linear_gain * state[0] + self.a * state[1]
         return float(self.linear_gain * state[0] + self.a * state[1])
@@ -92,7 +114,22 @@ class BoucWen(SteppedModel):
         return straight, crossed, reach
 
     def step(self, state, u: float) -> tuple[np.ndarray, float]:
-        """Exact step to input ``u``: ``(state, y)`` (CasADi expressions when ``state`` or ``u`` is one)."""
+        """Exact step to input ``u``: ``(state, y)`` (CasADi expressions when ``state`` or ``u`` is one).
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            State before the step.
+        u : float or CasADi expression
+            New input (finite).
+
+        Returns
+        -------
+        state : ndarray or CasADi expression
+            State after the step.
+        y : float or CasADi expression
+            Output after the step.
+        """
         if symbolic(state) or symbolic(u):
             du, z = u - state[0], state[1]
             s = ca.if_else(du > 0, 1.0, -1.0)
@@ -114,8 +151,20 @@ class BoucWen(SteppedModel):
 
         Smoothed: the input's direction ``tanh(Δu / direction_eps)``, the side of ``ζ = 0``
         ``tanh(ζ / eps)`` (at ``ζ = 0`` the move's direction, as in the exact step) and the crossing
-        of zero within the move blended over ``eps`` of input (``direction_eps`` defaults to
-        ``eps``). The closed form is kept, so the error is O(eps) and does not grow with the move.
+        of zero within the move blended over ``eps`` of input. The closed form is kept, so the
+        error is O(eps) and does not grow with the move.
+
+        Parameters
+        ----------
+        eps : float
+            Width of the side of ``ζ = 0`` and of the zero crossing, > 0.
+        direction_eps : float, optional
+            Width of the direction detection (default: ``eps``).
+
+        Returns
+        -------
+        casadi.Function
+            ``(state, u) -> (state_next, y)``.
         """
         check_smoothing(eps, direction_eps)
         direction_eps = direction_eps or eps
@@ -137,6 +186,13 @@ class BoucWen(SteppedModel):
 
         After a move of 40 loop widths ``ζ`` is within ``e^-40`` of its bound and the output moves
         with ``k`` alone.
+
+        Returns
+        -------
+        edges : tuple of float
+            ``(inf, -inf)``: no input edge, only the move counts.
+        reach : float
+            ``40 / (β − |γ|)`` (input units).
         """
         return (np.inf, -np.inf), 40.0 / (self.beta - abs(self.gamma))
 
@@ -145,6 +201,20 @@ class BoucWen(SteppedModel):
 
         A bisection over a monotone move (NumPy or CasADi). With ``k = 0`` a target beyond the
         loop's reach gives the input where ``ζ`` has all but reached its bound.
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            State to move from.
+        y_target : float or CasADi expression
+            Output to reach (finite).
+
+        Returns
+        -------
+        state : ndarray or CasADi expression
+            State after the move.
+        u : float or CasADi expression
+            The input.
         """
         if symbolic(state) or symbolic(y_target):
             return bisection_inverse(self, state, y_target, *self.linear_beyond(),

@@ -1,7 +1,7 @@
 """The models' recursions over a whole record, compiled by numba, for identification.
 
 Identification simulates a candidate model along a record of tens of thousands of samples
-hundreds of times; a Python loop over the samples would take most of a minute per family.
+hundreds of times; a Python loop over the samples would dominate the fit.
 Each function here repeats, sample by sample, the exact ``step`` of a model class (the tests
 check them against each other), on plain arrays: nothing here knows about CasADi or states.
 """
@@ -16,7 +16,19 @@ from numba import njit
 def play_outputs(u, thresholds, z0):
     """Play operators' outputs ``z_k = clip(z_{k-1}, u_k − r, u_k + r)`` for every threshold ``r``.
 
-    One column per threshold ``r``, from ``z0`` before the first sample.
+    Parameters
+    ----------
+    u : ndarray
+        Input at each sample.
+    thresholds : ndarray
+        Play thresholds ``r``.
+    z0 : ndarray
+        Play outputs before the first sample, one per threshold.
+
+    Returns
+    -------
+    ndarray, shape (len(u), len(thresholds))
+        One column per threshold.
     """
     n, m = len(u), len(thresholds)
     out = np.empty((n, m))
@@ -39,7 +51,23 @@ def play_outputs(u, thresholds, z0):
 def kp_kernel_outputs(p, u_last, rho1, rho2, delta, xi0):
     """KP kernels' outputs (wang2025 eq. (6)) along the normalised input ``p``.
 
-    From the last input ``u_last`` and kernel outputs ``xi0``.
+    Parameters
+    ----------
+    p : ndarray
+        Normalised input at each sample.
+    u_last : float
+        Normalised input before the first sample.
+    rho1, rho2 : ndarray
+        Kernel thresholds.
+    delta : float
+        Slope parameter δ of eq. (7).
+    xi0 : ndarray
+        Kernel outputs before the first sample.
+
+    Returns
+    -------
+    ndarray, shape (len(p), len(rho1))
+        The kernel outputs ξ after each sample, one column per kernel.
     """
     n, m = len(p), len(rho1)
     out = np.empty((n, m))
@@ -77,6 +105,22 @@ def bouc_wen_advance(z, du, a, beta, gamma):
     """Bouc–Wen's internal variable after the input moves by ``du`` (exact, n = 1).
 
     ``dz/du = a − β sgn(du) z − γ |z|``, crossing ``z = 0`` within the move if it does.
+
+    Parameters
+    ----------
+    z : float
+        Internal variable before the move.
+    du : float
+        Input move.
+    a : float
+        Slope ``dz/du`` at ``z = 0``.
+    beta, gamma : float
+        β and γ (1 / input unit).
+
+    Returns
+    -------
+    float
+        ``z`` after the move.
     """
     if du == 0.0:
         return z
@@ -95,7 +139,24 @@ def bouc_wen_advance(z, du, a, beta, gamma):
 
 @njit(cache=True)
 def bouc_wen_states(u, a, beta, gamma, z0):
-    """Bouc–Wen's internal variable after each sample of ``u`` (from ``u[0]`` with ``z0``)."""
+    """Bouc–Wen's internal variable after each sample of ``u`` (from ``u[0]`` with ``z0``).
+
+    Parameters
+    ----------
+    u : ndarray
+        Input at each sample.
+    a : float
+        Slope ``dz/du`` at ``z = 0``.
+    beta, gamma : float
+        β and γ (1 / input unit).
+    z0 : float
+        Internal variable at ``u[0]``.
+
+    Returns
+    -------
+    ndarray
+        ``z`` after each sample.
+    """
     n = len(u)
     out = np.empty(n)
     z = z0
@@ -128,6 +189,28 @@ def power_function_outputs(s, asc_s, asc_t, desc_s, desc_t, k11, k01, k12, k02, 
     """zhou2024's power-function torque along ``s`` from the resting state at ``s[0]``.
 
     The same as :meth:`PowerFunctionHysteresis.step`, sample by sample.
+
+    Parameters
+    ----------
+    s : ndarray
+        Virtual deformation at each sample.
+    asc_s, asc_t : ndarray
+        Knots and torques of the ascending polyline (torques scaled).
+    desc_s, desc_t : ndarray
+        Knots and torques of the descending polyline (torques scaled).
+    k11, k01 : float
+        ``Δs1(s01) = k11·s01 + k01``, eq. (11).
+    k12, k02 : float
+        ``Δs2(s02) = k12·s02 + k02``, eq. (11).
+    gp, gn : ndarray
+        ``(g2, g1, g0)`` of the exponent b(s0) for s0 > 0 and otherwise, eq. (18).
+    lo, hi : float
+        Range b is clamped to.
+
+    Returns
+    -------
+    ndarray
+        The torque after each sample.
     """
     n = len(s)
     out = np.empty(n)
@@ -197,6 +280,20 @@ def parametric_outputs(u, p1, p2):
     """katalenic2013's operator H (eq. (3)) along ``u`` from the demagnetised state at ``u[0]``.
 
     The same as :meth:`ParametricHysteresis.step`, sample by sample.
+
+    Parameters
+    ----------
+    u : ndarray
+        Input at each sample.
+    p1 : float
+        Largest half-width of the loop (input units).
+    p2 : float
+        Rate of approach to the asymptotes (1 / input units).
+
+    Returns
+    -------
+    ndarray
+        The operator's output after each sample.
     """
     n = len(u)
     out = np.empty(n)

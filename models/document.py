@@ -36,7 +36,26 @@ def _plain(value):
 
 def model_document(identified: Identified, units: dict | None = None, validation: dict | None = None,
                    version: str = "", source: dict | None = None) -> dict:
-    """The JSON-ready document of an identified model."""
+    """The JSON-ready document of an identified model.
+
+    Parameters
+    ----------
+    identified : Identified
+        The identified model.
+    units : dict, optional
+        Units of ``"u"`` and ``"y"`` (default: both empty).
+    validation : dict, optional
+        Validation results, stored under ``"validation"`` when given.
+    version : str, optional
+        hystmpc version that wrote the document.
+    source : dict, optional
+        Where the data came from, stored under ``"source"`` when not empty.
+
+    Returns
+    -------
+    dict
+        The document, of plain JSON types.
+    """
     doc = {"schema": SCHEMA, "family": identified.family,
            "created": dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"), "version": version,
            "sample_period_s": identified.sample_period, "parameters": _plain(identified.parameters),
@@ -58,7 +77,20 @@ def model_document(identified: Identified, units: dict | None = None, validation
 
 
 def dynamics_from(spec: dict, where: str) -> LinearDynamics:
-    """A :class:`LinearDynamics` from a ``dynamics`` table (model document or actuator file)."""
+    """A :class:`LinearDynamics` from a ``dynamics`` table (model document or actuator file).
+
+    Parameters
+    ----------
+    spec : dict
+        The table: ``kind``, that kind's keys and optionally ``delay_samples``.
+    where : str
+        Where the table is, prefixed to every error message.
+
+    Returns
+    -------
+    LinearDynamics
+        The dynamics; ``ValueError`` for a missing, unknown or mistyped key.
+    """
     if not isinstance(spec, dict):
         raise ValueError(f"{where}: dynamics must be a table, got {spec!r}")
     if "kind" not in spec and spec:  # a table of parameters without its kind
@@ -94,7 +126,17 @@ def dynamics_from(spec: dict, where: str) -> LinearDynamics:
 def read_model_document(source: str | Path | dict, sample_period: float | None = None) -> Identified:
     """The model of a document (a path or the parsed dict); ``ValueError`` naming what is wrong.
 
-    ``sample_period`` replaces the document's (a creep model is discretised there).
+    Parameters
+    ----------
+    source : str, Path or dict
+        Path of the JSON document, or the parsed document.
+    sample_period : float, optional
+        Replaces the document's (s); a creep model is discretised there.
+
+    Returns
+    -------
+    Identified
+        The model, with its fit RMSE, sample count, offsets and alignment.
     """
     where = "model document"
     if not isinstance(source, dict):

@@ -65,6 +65,21 @@ def build_hysteresis(name: str, parameters: dict, sample_period: float):
 
     With ``input_offset`` and ``output_offset`` (0 when absent) around the model, and a
     ``creep_order`` (fitted with ``creep=True``) for families without a creep of their own.
+
+    Parameters
+    ----------
+    name : str
+        Family name, a key of :data:`FAMILIES`.
+    parameters : dict
+        The family's parameters, with the optional offsets and ``creep_order``.
+    sample_period : float
+        Sample period (s).
+
+    Returns
+    -------
+    tuple
+        ``(model, creep_order)``: the model (in an ``Offset`` when an offset is not 0) and its
+        creep order (0 without creep).
     """
     own = {k: v for k, v in parameters.items() if k not in OFFSET_KEYS}
     creep = own.pop("creep_order", None) if name != "fckp" else None
@@ -79,7 +94,24 @@ def build_hysteresis(name: str, parameters: dict, sample_period: float):
 
 
 def hysteresis_output(model, creep_order: float, u, sample_period: float) -> np.ndarray:
-    """Exact hysteresis (and creep) output along ``u`` from the relaxed state at ``u[0]``."""
+    """Exact hysteresis (and creep) output along ``u`` from the relaxed state at ``u[0]``.
+
+    Parameters
+    ----------
+    model : object
+        A hysteresis model from :func:`build_hysteresis`.
+    creep_order : float
+        Fractional creep order (0: no creep).
+    u : array_like
+        Input record.
+    sample_period : float
+        Sample period (s).
+
+    Returns
+    -------
+    ndarray
+        The output, one value per sample of ``u``.
+    """
     u = np.asarray(u, float)
     inner, (shift_in, shift_out) = ((model.inner, (model.input_offset, model.output_offset))
                                     if isinstance(model, Offset) else (model, (0.0, 0.0)))
@@ -91,8 +123,19 @@ def hysteresis_output(model, creep_order: float, u, sample_period: float) -> np.
 def compiled_response(model, u) -> np.ndarray | None:
     """The exact response of ``model`` along ``u`` from ``initial_state(u[0])``.
 
-    Computed by the compiled recursions of :mod:`hystmpc.models.compiled` (None for a model
-    without one).
+    Computed by the compiled recursions of :mod:`hystmpc.models.compiled`.
+
+    Parameters
+    ----------
+    model : object
+        A hysteresis model (without offsets).
+    u : ndarray
+        Input record.
+
+    Returns
+    -------
+    ndarray or None
+        The output, one value per sample of ``u``; None for a model without a compiled recursion.
     """
     from hystmpc.models.compiled import bouc_wen_states, kp_kernel_outputs, parametric_outputs, play_outputs
     from hystmpc.models.kp import ridge
@@ -202,7 +245,18 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
 
 
 def family(name: str) -> Family:
-    """The family called ``name``; ``ValueError`` naming the allowed ones otherwise."""
+    """The family called ``name``; ``ValueError`` naming the allowed ones otherwise.
+
+    Parameters
+    ----------
+    name : str
+        Public family name.
+
+    Returns
+    -------
+    Family
+        Its entry of :data:`FAMILIES`.
+    """
     if name not in FAMILIES:
         raise ValueError(f"unknown model family {name!r}; allowed: {', '.join(FAMILIES)}")
     return FAMILIES[name]
@@ -212,6 +266,18 @@ def fit_options(name: str, assignments: dict[str, Any]) -> dict[str, Any]:
     """The family's fit options with ``assignments`` (text or values) applied.
 
     Raises ``ValueError`` naming an unknown option or a bad value.
+
+    Parameters
+    ----------
+    name : str
+        Public family name.
+    assignments : dict
+        Option values by name, as text (``"1,2"`` for a tuple) or values, converted to the type of the default.
+
+    Returns
+    -------
+    dict
+        Every option of the family: the defaults with ``assignments`` applied.
     """
     fam = family(name)
     options = dict(fam.options)

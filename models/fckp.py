@@ -91,38 +91,117 @@ class Fckp(SteppedModel):
         return self.params.creep_order
 
     def normalise(self, u):
-        """Input voltage to the KP input p ∈ [−1, 1]."""
+        """Input voltage to the KP input p ∈ [−1, 1].
+
+        Parameters
+        ----------
+        u : float, ndarray or CasADi expression
+            Input (V).
+
+        Returns
+        -------
+        float, ndarray or CasADi expression
+            p, −1 at ``u_min`` and 1 at ``u_max``.
+        """
         lo = self.params.u_min
         if lo == 0:  # the paper's range [0, u_max], in its own arithmetic
             return 2.0 * u / self.params.u_max - 1.0
         return 2.0 * (u - lo) / (self.params.u_max - lo) - 1.0
 
     def denormalise(self, p):
-        """KP input back to volts."""
+        """KP input back to volts.
+
+        Parameters
+        ----------
+        p : float, ndarray or CasADi expression
+            Normalised input.
+
+        Returns
+        -------
+        float, ndarray or CasADi expression
+            Input (V).
+        """
         lo = self.params.u_min
         if lo == 0:
             return 0.5 * (p + 1.0) * self.params.u_max
         return 0.5 * (p + 1.0) * (self.params.u_max - lo) + lo
 
     def static(self, kappa):
-        """KP output κ to the creep-free displacement w (mm)."""
+        """KP output κ to the creep-free displacement w (mm).
+
+        Parameters
+        ----------
+        kappa : float, ndarray or CasADi expression
+            KP output κ.
+
+        Returns
+        -------
+        float, ndarray or CasADi expression
+            w = stroke (κ/Σμ + 1)/2 (mm).
+        """
         return self.params.stroke * 0.5 * (kappa / self.kp.total_weight + 1.0)
 
     def kappa_of(self, w):
-        """Inverse of :meth:`static`."""
+        """Inverse of :meth:`static`.
+
+        Parameters
+        ----------
+        w : float, ndarray or CasADi expression
+            Creep-free displacement (mm).
+
+        Returns
+        -------
+        float, ndarray or CasADi expression
+            KP output κ.
+        """
         return (2.0 * w / self.params.stroke - 1.0) * self.kp.total_weight
 
     def initial_state(self, u0: float = 0.0) -> np.ndarray:
-        """Demagnetised at ``u0`` volts (every kernel at −1 at ``u_min``, the default zero)."""
+        """Demagnetised at ``u0`` volts (every kernel at −1 at ``u_min``, the default zero).
+
+        Parameters
+        ----------
+        u0 : float, optional
+            Input the state rests at (V).
+
+        Returns
+        -------
+        ndarray
+            The KP state.
+        """
         return self.kp.initial_state(float(self.normalise(u0)))
 
     def output(self, state):
-        """Creep-free displacement w (mm) of a state (NumPy or CasADi)."""
+        """Creep-free displacement w (mm) of a state (NumPy or CasADi).
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            A KP state.
+
+        Returns
+        -------
+        float or CasADi expression
+            w (mm).
+        """
         w = self.static(self.kp.output(state))
         return w if symbolic(w) else float(w)
 
     def mean_static_curve(self, n: int = 401) -> tuple[np.ndarray, np.ndarray]:
-        """Mean of the rising and falling major-loop branches of w(u): ``(u, w)`` on ``n`` voltages."""
+        """Mean of the rising and falling major-loop branches of w(u): ``(u, w)`` on ``n`` voltages.
+
+        Parameters
+        ----------
+        n : int, optional
+            Number of voltages, evenly spaced over ``[u_min, u_max]``.
+
+        Returns
+        -------
+        u : ndarray
+            The voltages (V).
+        w : ndarray
+            The mean creep-free displacement at each (mm).
+        """
         u = np.linspace(self.params.u_min, self.params.u_max, n)
         state = self.initial_state()
         up = np.empty(n)
@@ -134,7 +213,18 @@ class Fckp(SteppedModel):
         return u, 0.5 * (up + down[::-1])
 
     def creep(self, window: int | None = None) -> GrunwaldLetnikov:
-        """A fresh creep memory: ``D^(−α)`` at step h with memory window ``window``."""
+        """A fresh creep memory: ``D^(−α)`` at step h with memory window ``window``.
+
+        Parameters
+        ----------
+        window : int, optional
+            Memory window (samples); None: the full memory.
+
+        Returns
+        -------
+        GrunwaldLetnikov
+            The empty memory.
+        """
         return GrunwaldLetnikov(-self.params.creep_order, self.params.sample_period, window)
 
     def creep_inverse(self, window: int | None = None) -> GrunwaldLetnikov:
@@ -142,6 +232,16 @@ class Fckp(SteppedModel):
 
         The exact inverse of :meth:`creep` for the same h and full memory, since the GL weights of
         ±α convolve to 1.
+
+        Parameters
+        ----------
+        window : int, optional
+            Memory window (samples); None: the full memory.
+
+        Returns
+        -------
+        GrunwaldLetnikov
+            The empty memory.
         """
         return GrunwaldLetnikov(self.params.creep_order, self.params.sample_period, window)
 
@@ -149,6 +249,20 @@ class Fckp(SteppedModel):
         """Exact KP step to voltage ``u``; returns ``(state, w)`` (creep-free, mm).
 
         Also on CasADi expressions.
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            KP state before the step.
+        u : float or CasADi expression
+            New input (V).
+
+        Returns
+        -------
+        state : ndarray or CasADi expression
+            KP state after the step.
+        w : float or CasADi expression
+            Creep-free displacement after the step (mm).
         """
         if symbolic(state) or symbolic(u):
             state, kappa = self.kp.step(state, self.normalise(u))
@@ -157,7 +271,24 @@ class Fckp(SteppedModel):
         return state, float(self.static(kappa))
 
     def creep_step(self, state, creep: GrunwaldLetnikov, u: float) -> tuple[np.ndarray, float]:
-        """Exact FCKP step: KP, then push w into the creep memory; returns ``(state, W)``."""
+        """Exact FCKP step: KP, then push w into the creep memory; returns ``(state, W)``.
+
+        Parameters
+        ----------
+        state : ndarray
+            KP state before the step.
+        creep : GrunwaldLetnikov
+            Creep memory (from :meth:`creep`), updated in place.
+        u : float
+            New input (V).
+
+        Returns
+        -------
+        state : ndarray
+            KP state after the step.
+        W : float
+            Displacement with creep (mm).
+        """
         state, w = self.step(state, u)
         return state, creep.push(w)
 
@@ -165,6 +296,18 @@ class Fckp(SteppedModel):
         """Smooth KP step in volts ``(state, u) -> (state_next, w)`` (CasADi).
 
         See :meth:`KrasnoselskiiPokrovskii.smooth_step` for the error.
+
+        Parameters
+        ----------
+        eps : float
+            Width of the smoothed ridge and max/min, > 0.
+        direction_eps : float, optional
+            Width of the direction detection (default: ``eps``).
+
+        Returns
+        -------
+        casadi.Function
+            ``(state, u) -> (state_next, y)``, ``y`` the creep-free displacement w (mm).
         """
         inner = self.kp.smooth_step(eps, direction_eps)
 
@@ -176,9 +319,25 @@ class Fckp(SteppedModel):
     def inverse_step(self, state, w_target: float, zeta: float = 0.01) -> tuple[np.ndarray, float]:
         """Section 3.2: the voltage whose KP output reaches ``w_target``; returns ``(state, u)``.
 
-        Searched from the last input in steps of ζ (V). On CasADi expressions (a generated
+        Searched from the last input in steps of ζ. On CasADi expressions (a generated
         controller) it bisects instead (:meth:`KrasnoselskiiPokrovskii.bisection_inverse`; ``zeta``
-        does not apply); both find the same input to about 2e-12 V.
+        does not apply); both find the same input (docs/dea.md).
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            KP state to move from.
+        w_target : float or CasADi expression
+            Creep-free displacement to reach (mm).
+        zeta : float, optional
+            Search step ζ (V).
+
+        Returns
+        -------
+        state : ndarray or CasADi expression
+            KP state after the move.
+        u : float or CasADi expression
+            The input (V), within ``[u_min, u_max]``.
         """
         if symbolic(state) or symbolic(w_target):
             p_state, p = self.kp.bisection_inverse(state, self.kappa_of(w_target))

@@ -42,6 +42,17 @@ def bouc_wen_problem(record: Record) -> Problem:
 
     ``k`` and ``A`` (either sign, the output monotone) projected on the columns ``u``, ``ζ`` and
     ``m·u − ζ`` with non-negative weights, ``m = 2β/(β+γ)`` the largest ``dζ/du``.
+
+    Parameters
+    ----------
+    record : Record
+        The record.
+
+    Returns
+    -------
+    Problem
+        The fit problem, started at the best of a grid of β and γ/β; its parameters are
+        ``linear_gain``, ``a``, ``beta`` and ``gamma``.
     """
     u = record.u
     span = float(np.ptp(u))
@@ -71,7 +82,19 @@ def bouc_wen_problem(record: Record) -> Problem:
 
 
 def parametric_problem(record: Record) -> Problem:
-    """``y = gain · H_{p1,p2}[u]``: the gain projected (>= 0), log p1 and log p2 moved."""
+    """``y = gain · H_{p1,p2}[u]``: the gain projected (>= 0), log p1 and log p2 moved.
+
+    Parameters
+    ----------
+    record : Record
+        The record.
+
+    Returns
+    -------
+    Problem
+        The fit problem, started at the best of a grid over the input span; its parameters are
+        ``p1``, ``p2`` and ``gain``.
+    """
     u = record.u
     span = float(np.ptp(u))
 
@@ -92,9 +115,33 @@ def kp_problem(record: Record, creep: bool, levels: int = 12, max_span: int = 2,
                u_max: float = 0.0, u_min: float = float("nan")) -> Problem:
     """KP (and FCKP with ``creep``) with the density of wang2025 Fig. 3 on a threshold grid.
 
-    The grid spans ``[u_min, u_max]`` (fitted where not given: ``u_max = 0``, ``u_min`` NaN). The
-    stroke and the output offset are projected (the offset inside the creep, where the models put
-    it); ``c``, ``σ``, the range's free ends and α are moved.
+    The grid spans ``[u_min, u_max]``. The stroke and the output offset are projected (the
+    offset inside the creep, where the models put it); ``c``, ``σ``, the range's free ends and α
+    are moved.
+
+    Parameters
+    ----------
+    record : Record
+        The record.
+    creep : bool
+        Fit FCKP's creep order α; without it α stays 0 (KP).
+    levels : int, optional
+        Levels of the threshold grid.
+    max_span : int, optional
+        Widest kernel of the threshold grid (levels).
+    delta : float, optional
+        Width of the kernels' ridges.
+    u_max : float, optional
+        Upper end of the input range; 0: fitted.
+    u_min : float, optional
+        Lower end of the input range; NaN: fitted.
+
+    Returns
+    -------
+    Problem
+        The fit problem, started at the best of a grid of densities and ranges; its parameters
+        are the grid's and ``density_c``, ``density_sigma``, ``stroke``, ``output_offset`` (and
+        ``creep_order`` with ``creep``).
     """
     u = record.u
     lo_u, hi_u, span = float(np.min(u)), float(np.max(u)), float(np.ptp(u))
@@ -159,7 +206,20 @@ def _polyline_start(s, tau, knots) -> np.ndarray:
 
 
 def power_function_outputs_of(model: PowerFunctionHysteresis, s) -> np.ndarray:
-    """The exact response of :meth:`PowerFunctionHysteresis.step` along ``s`` from ``initial_state(s[0])``."""
+    """The exact response of :meth:`PowerFunctionHysteresis.step` along ``s`` from ``initial_state(s[0])``.
+
+    Parameters
+    ----------
+    model : PowerFunctionHysteresis
+        The model.
+    s : array_like
+        Input record.
+
+    Returns
+    -------
+    ndarray
+        The output, one value per sample of ``s``.
+    """
     from hystmpc.models.compiled import power_function_outputs
     a, d = np.asarray(model.ascending, float), np.asarray(model.descending, float)
     scale = model.torque_scale
@@ -175,11 +235,27 @@ def power_function_problem(record: Record, knots: int = 10, ascending_s: tuple =
 
     The torques carry the scale and an output offset.
 
-    ``knots`` evenly spaced knots for both polylines, started on the input's range with the
-    grid's ends fitted too, unless ``ascending_s`` / ``descending_s`` name them (then fixed).
     When both polylines span the same knots at their ends, they are made to meet there (a major
     loop closes at its tips, as Table V's points E and R): the descending polyline is never
     followed near the tips, so its ends could not be told from the data otherwise.
+
+    Parameters
+    ----------
+    record : Record
+        The record.
+    knots : int, optional
+        Number of evenly spaced knots of both polylines, started on the input's range with the
+        grid's ends fitted too (when neither ``ascending_s`` nor ``descending_s`` is given).
+    ascending_s : tuple of float, optional
+        Fixed knots of the ascending polyline (at least two, increasing).
+    descending_s : tuple of float, optional
+        Fixed knots of the descending polyline (at least two, increasing).
+
+    Returns
+    -------
+    Problem
+        The fit problem with fixed unit weight and no intercept; its parameters are those of
+        :class:`PowerFunctionHysteresis`.
     """
     u = record.u
     lo, hi = float(np.min(u)), float(np.max(u))

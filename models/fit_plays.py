@@ -69,7 +69,20 @@ def _play_groups(u, n: int, transform):
 
 
 def prandtl_ishlinskii_problem(record: Record, plays: int = 10) -> Problem:
-    """``y = p0·u + Σ p_i Play_{r_i}[u]``: the thresholds nonlinear, ``p0`` and ``p_i >= 0`` projected."""
+    """``y = p0·u + Σ p_i Play_{r_i}[u]``: the thresholds nonlinear, ``p0`` and ``p_i >= 0`` projected.
+
+    Parameters
+    ----------
+    record : Record
+        The record.
+    plays : int, optional
+        Most play operators (the start keeps the heaviest of the ladder's).
+
+    Returns
+    -------
+    Problem
+        The fit problem; its parameters are ``linear_gain``, ``thresholds`` and ``weights``.
+    """
     u = record.u
     r0 = _start_thresholds(record, plays, lambda u, p: np.column_stack((u, p)))
     lower, upper = _log_bounds(u, len(r0))
@@ -84,7 +97,20 @@ def prandtl_ishlinskii_problem(record: Record, plays: int = 10) -> Problem:
 
 
 def maxwell_slip_problem(record: Record, elements: int = 10) -> Problem:
-    """``y = Σ k_i (u − Play_{r_i}[u])``: the thresholds nonlinear, ``k_i >= 0`` projected; ``w_i = k_i r_i``."""
+    """``y = Σ k_i (u − Play_{r_i}[u])``: the thresholds nonlinear, ``k_i >= 0`` projected; ``w_i = k_i r_i``.
+
+    Parameters
+    ----------
+    record : Record
+        The record.
+    elements : int, optional
+        Most elasto-slide elements (the start keeps the heaviest of the ladder's).
+
+    Returns
+    -------
+    Problem
+        The fit problem; its parameters are ``stiffness`` and ``breakaway``.
+    """
     u = record.u
     r0 = _start_thresholds(record, elements, lambda u, p: u[:, None] - p)
     lower, upper = _log_bounds(u, len(r0))
@@ -125,7 +151,24 @@ def _differences(rows: int, cols: int) -> np.ndarray:
 
 
 def preisach_problem(record: Record, plays: int = 8, cells: int = 8, smoothing: float = 1e-6) -> Problem:
-    """A Preisach density on ``plays`` thresholds (and the reversible part) × ``cells`` knot cells."""
+    """A Preisach density on ``plays`` thresholds (and the reversible part) × ``cells`` knot cells.
+
+    Parameters
+    ----------
+    record : Record
+        The record.
+    plays : int, optional
+        Number of play thresholds, in [0, 50].
+    cells : int, optional
+        Number of knot cells, in [1, 50].
+    smoothing : float, optional
+        Weight of the smoothness penalty (0: none).
+
+    Returns
+    -------
+    Problem
+        The fit problem; its parameters are ``thresholds``, ``knots`` and ``density``.
+    """
     if not (isinstance(cells, int) and 1 <= cells <= 50):
         raise ValueError(f"cells must be an integer in [1, 50], got {cells}")
     if not (isinstance(plays, int) and 0 <= plays <= 50):
@@ -163,8 +206,25 @@ def preisach_problem(record: Record, plays: int = 8, cells: int = 8, smoothing: 
 def generalised_pi_problem(record: Record, plays: int = 8, cells: int = 6, start: dict | None = None) -> Problem:
     """``y = Γ(PI[u])``, started from a PI fit (``start``, fitted here when not given).
 
-    The PI part's weights (normalised to unit gain), its thresholds and Γ's knots (``cells``
-    cells over the PI output's range) nonlinear, Γ's slopes projected (>= 0).
+    The PI part's weights (normalised to unit gain), its thresholds and Γ's knots nonlinear,
+    Γ's slopes projected (>= 0).
+
+    Parameters
+    ----------
+    record : Record
+        The record.
+    plays : int, optional
+        Most play operators of the PI fit made when ``start`` is not given.
+    cells : int, optional
+        Number of Γ's cells over the PI output's range, in [1, 50].
+    start : dict, optional
+        Parameters of a PI fit (``linear_gain``, ``thresholds``, ``weights``).
+
+    Returns
+    -------
+    Problem
+        The fit problem; its parameters are ``linear_gain``, ``thresholds``, ``weights``,
+        ``output_knots`` and ``output_values``.
     """
     if not (isinstance(cells, int) and 1 <= cells <= 50):
         raise ValueError(f"cells must be an integer in [1, 50], got {cells}")
@@ -212,7 +272,18 @@ def generalised_pi_problem(record: Record, plays: int = 8, cells: int = 6, start
 
 
 def linear_problem(record: Record) -> Problem:
-    """The naive model: ``y = k·u`` (any sign) and an offset, no memory."""
+    """The naive model: ``y = k·u`` (any sign) and an offset, no memory.
+
+    Parameters
+    ----------
+    record : Record
+        The record.
+
+    Returns
+    -------
+    Problem
+        The fit problem; its parameter is ``gain``.
+    """
     u = record.u
     return Problem([(np.zeros(0, int), lambda theta: u[:, None])], np.zeros(0), np.zeros(0), np.zeros(0),
                    np.array([False]), lambda theta, w: {"gain": float(w[0])})

@@ -16,7 +16,20 @@ import numpy as np
 
 
 def gl_weights(order: float, n: int) -> np.ndarray:
-    """The first ``n`` Grünwald–Letnikov weights of ``order``."""
+    """The first ``n`` Grünwald–Letnikov weights of ``order``.
+
+    Parameters
+    ----------
+    order : float
+        Fractional order q (finite; negative: integral).
+    n : int
+        Number of weights, >= 1.
+
+    Returns
+    -------
+    ndarray
+        ``w_0 = 1, w_1, …, w_{n−1}``.
+    """
     if n < 1:
         raise ValueError(f"n must be >= 1, got {n}")
     if not np.isfinite(order):
@@ -36,11 +49,16 @@ def gl_apply(order: float, h: float, values, window: int | None = None) -> np.nd
     order : float
         Fractional order (negative: integral).
     h : float
-        Sample period.
+        Sample period (s).
     values : array_like, shape (n,)
         ``f(t_0), …, f(t_{n−1})``; ``f`` is taken as zero before ``t_0``.
     window : int, optional
         Keep only the current sample and the last ``window`` past samples (None: all).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        ``D^order f`` at each sample.
     """
     if not h > 0:
         raise ValueError(f"h must be > 0, got {h}")
@@ -58,6 +76,20 @@ def creep_integral(w, order: float, sample_period: float) -> np.ndarray:
     """``D^(−order)`` of ``w`` along its first axis (zero before the first sample) by FFT.
 
     The GL sum of :func:`gl_apply` in O(n log n).
+
+    Parameters
+    ----------
+    w : array_like
+        Signal, one sample (or row of signals) per entry of the first axis.
+    order : float
+        Creep order α; ``w`` is returned unchanged when it is 0 or below.
+    sample_period : float
+        Sample period h (s).
+
+    Returns
+    -------
+    ndarray
+        ``D^(−order) w``, of the shape of ``w``.
     """
     from scipy.signal import fftconvolve
     w = np.asarray(w, float)
@@ -80,7 +112,7 @@ class GrunwaldLetnikov:
         Sample period (s).
     window : int, optional
         Memory window L in past samples; None keeps the full memory.
-    capacity : int
+    capacity : int, optional
         Samples to pre-allocate (grows when exceeded).
     """
 
@@ -113,14 +145,31 @@ class GrunwaldLetnikov:
             self._hist = hist
 
     def push(self, value: float) -> float:
-        """Append ``f(t_k)`` and return ``D^order f(t_k)``."""
+        """Append ``f(t_k)`` and return ``D^order f(t_k)``.
+
+        Parameters
+        ----------
+        value : float
+            The new sample ``f(t_k)``.
+
+        Returns
+        -------
+        float
+            ``D^order f(t_k)`` (as :meth:`value`).
+        """
         self._grow(self._n + 1)
         self._hist[self._n] = value
         self._n += 1
         return self.value()
 
     def value(self) -> float:
-        """``D^order f`` at the last pushed sample."""
+        """``D^order f`` at the last pushed sample.
+
+        Returns
+        -------
+        float
+            The GL sum over the memory (within the window, if any); 0 before the first push.
+        """
         n = self._n if self.window is None else min(self._n, self.window + 1)
         recent = self._hist[self._n - n: self._n][::-1]
         return float(self._scale * (self._w[:n] @ recent))
@@ -130,8 +179,17 @@ class GrunwaldLetnikov:
 
         ``D^order f(t_{k+i}) = h^(−order) [Σ_{j<i} w_j f_{k+i−j} + Σ_{j≥i} w_j f_{k+i−j}]``:
         the first sum holds the future samples (decisions of a predictive controller), the
-        second only pushed ones; this returns ``h^(−order)`` times the second sum for each
-        ``i`` (within the window, if any).
+        second only pushed ones.
+
+        Parameters
+        ----------
+        horizon : int
+            Number of future samples.
+
+        Returns
+        -------
+        ndarray, shape (horizon,)
+            ``h^(−order)`` times the second sum for each ``i`` (within the window, if any).
         """
         self._grow(self._n + horizon + 1)
         out = np.empty(horizon)
@@ -153,6 +211,24 @@ def window_functions(order: float, h: float, window: int, horizon: int) -> tuple
 
     Fixed size and plain sums (newest sample first), so generated C and a Python controller
     that call them compute the same numbers to the last bit.
+
+    Parameters
+    ----------
+    order : float
+        Fractional order (``−α`` for the FCKP creep integral).
+    h : float
+        Sample period (s).
+    window : int
+        Memory window L in past samples, >= 0.
+    horizon : int
+        Number of future samples of ``history``, >= 1.
+
+    Returns
+    -------
+    push : casadi.Function
+        ``(buffer, f) -> (buffer_next, value)``.
+    history : casadi.Function
+        ``(buffer) -> terms``, ``horizon`` terms.
     """
     if window < 0 or horizon < 1:
         raise ValueError(f"window must be >= 0 and horizon >= 1, got {window}, {horizon}")

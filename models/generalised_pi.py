@@ -75,11 +75,35 @@ class GeneralisedPI(SteppedModel):
         return np.diff(self.output_values) / np.diff(self.output_knots)
 
     def curve(self, v, eps: float | None = None):
-        """``Γ(v)`` (NumPy or CasADi; ``eps`` smooths its kinks)."""
+        """``Γ(v)`` (NumPy or CasADi; ``eps`` smooths its kinks).
+
+        Parameters
+        ----------
+        v : float, ndarray or CasADi expression
+            PI output.
+        eps : float, optional
+            Width over which each kink is smoothed (PI output units); None or 0: the exact curve.
+
+        Returns
+        -------
+        float, ndarray or CasADi expression
+            ``Γ(v)`` (output units).
+        """
         return _hinges(v, self.output_knots[0], self.output_values[0], self.slopes, self.output_knots, eps)
 
     def curve_inverse(self, y):
-        """``Γ⁻¹(y)`` (NumPy or CasADi)."""
+        """``Γ⁻¹(y)`` (NumPy or CasADi).
+
+        Parameters
+        ----------
+        y : float, ndarray or CasADi expression
+            Output.
+
+        Returns
+        -------
+        float, ndarray or CasADi expression
+            The PI output ``v`` with ``Γ(v) = y``.
+        """
         return _hinges(y, self.output_values[0], self.output_knots[0], 1.0 / self.slopes, self.output_values)
 
     @property
@@ -88,16 +112,53 @@ class GeneralisedPI(SteppedModel):
         return self.inner.state_names
 
     def initial_state(self, u0: float = 0.0) -> np.ndarray:
-        """The PI part's virgin state at ``u0``."""
+        """The PI part's virgin state at ``u0``.
+
+        Parameters
+        ----------
+        u0 : float, optional
+            Input.
+
+        Returns
+        -------
+        ndarray
+            ``[u0, 0, …, 0]``.
+        """
         return self.inner.initial_state(u0)
 
     def output(self, state):
-        """``Γ`` of the PI output (NumPy or CasADi)."""
+        """``Γ`` of the PI output (NumPy or CasADi).
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            A state of the PI part.
+
+        Returns
+        -------
+        float or CasADi expression
+            The output.
+        """
         y = self.curve(self.inner.output(state))
         return y if symbolic(y) else float(y)
 
     def step(self, state, u: float) -> tuple[np.ndarray, float]:
-        """Exact step: ``(state, Γ(v))``."""
+        """Exact step: ``(state, Γ(v))``.
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            State before the step.
+        u : float or CasADi expression
+            New input.
+
+        Returns
+        -------
+        state : ndarray or CasADi expression
+            The PI part's state after the step.
+        y : float or CasADi expression
+            ``Γ`` of the PI output after the step.
+        """
         nxt, v = self.inner.step(state, u)
         y = self.curve(v)
         return nxt, y if symbolic(y) else float(y)
@@ -107,6 +168,19 @@ class GeneralisedPI(SteppedModel):
 
         Scaling by the gain keeps ``eps`` in input units. The error is the PI part's times Γ's
         largest slope, plus ``eps·gain/2`` per kink times its change of slope.
+
+        Parameters
+        ----------
+        eps : float
+            Smoothing width of the PI part (see :meth:`PrandtlIshlinskii.smooth_step`) and, times
+            its gain, of Γ's kinks; > 0.
+        direction_eps : None
+            Must stay unset: no direction detection (``ValueError`` otherwise).
+
+        Returns
+        -------
+        casadi.Function
+            ``(state, u) -> (state_next, y)``.
         """
         check_smoothing(eps, direction_eps, has_direction=False)
         inner = self.inner.smooth_step(eps)
@@ -118,7 +192,22 @@ class GeneralisedPI(SteppedModel):
         return smooth_function("generalised_pi_smooth", len(self.state_names), expressions)
 
     def inverse_step(self, state, y_target: float) -> tuple[np.ndarray, float]:
-        """Exact: ``Γ⁻¹`` of the target, then the PI part's inverse (NumPy or CasADi)."""
+        """Exact: ``Γ⁻¹`` of the target, then the PI part's inverse (NumPy or CasADi).
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            State to move from.
+        y_target : float or CasADi expression
+            Output to reach; a NumPy one must be finite (else ``ValueError``).
+
+        Returns
+        -------
+        state : ndarray or CasADi expression
+            State after the move.
+        u : float or CasADi expression
+            The input.
+        """
         if not symbolic(state) and not symbolic(y_target):
             if not np.isfinite(y_target):
                 raise ValueError(f"y_target must be finite, got {y_target}")

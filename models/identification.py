@@ -63,13 +63,34 @@ class Identified:
     """What the fit found out along the way (parameters at a search bound, the dynamics' own fit)."""
 
     def hysteresis(self):
-        """``(hysteresis model, creep order)``, offsets included."""
+        """``(hysteresis model, creep order)``, offsets included.
+
+        Returns
+        -------
+        model : object
+            The hysteresis model (:func:`build_hysteresis`).
+        creep_order : float
+            Its creep order (0 without creep).
+        """
         return build_hysteresis(self.family, {**self.parameters, "input_offset": self.offsets.get("input", 0.0),
                                               "output_offset": self.offsets.get("output", 0.0)},
                                 self.sample_period)
 
     def predict(self, u, alignment: str | None = None) -> np.ndarray:
-        """Modelled output for the inputs ``u`` from rest at ``u[0]``, rows read as the fit record's."""
+        """Modelled output for the inputs ``u`` from rest at ``u[0]``, rows read as the fit record's.
+
+        Parameters
+        ----------
+        u : array_like
+            Input at each sample.
+        alignment : str, optional
+            ``next`` or ``same`` instead of the fit's :attr:`alignment`.
+
+        Returns
+        -------
+        ndarray
+            The modelled output at each sample, through the linear block and its dead time.
+        """
         model, creep_order = self.hysteresis()
         h = hysteresis_output(model, creep_order, u, self.sample_period)
         return respond(h, self.dynamics, Record(np.asarray(u, float), h, self.sample_period,
@@ -77,7 +98,22 @@ class Identified:
 
 
 def check_data(u, y, sample_period: float, what: str = "data") -> tuple[np.ndarray, np.ndarray]:
-    """``ValueError`` naming what is wrong with an identification record."""
+    """``ValueError`` naming what is wrong with an identification record.
+
+    Parameters
+    ----------
+    u, y : array_like
+        Input and output, 1-D of the same length, at least :data:`MIN_SAMPLES`, finite, ``u`` not constant.
+    sample_period : float
+        Sample period (s), > 0.
+    what : str, optional
+        Name of the record in the messages.
+
+    Returns
+    -------
+    u, y : ndarray
+        The record as float arrays.
+    """
     u, y = np.asarray(u, float), np.asarray(y, float)
     if u.shape != y.shape or u.ndim != 1:
         raise ValueError(f"{what}: u and y must be columns of the same length")
@@ -93,7 +129,13 @@ def check_data(u, y, sample_period: float, what: str = "data") -> tuple[np.ndarr
 
 
 def check_alignment(alignment: str) -> None:
-    """``ValueError`` unless ``alignment`` is ``next``, ``same`` or ``auto``."""
+    """``ValueError`` unless ``alignment`` is ``next``, ``same`` or ``auto``.
+
+    Parameters
+    ----------
+    alignment : str
+        The alignment to check.
+    """
     if alignment not in (*ALIGNMENTS, "auto"):
         raise ValueError(f"alignment {alignment!r}; allowed: next, same, auto")
 
@@ -107,6 +149,20 @@ def choose_alignment(u, y, sample_period: float, warm_up: int = 0) -> str:
 
     Judged by a static Preisach fit on an even grid of 12 thresholds × 12 cells (constrained
     least squares, no refinement), flexible enough to fit every family here closely.
+
+    Parameters
+    ----------
+    u, y : array_like
+        The record.
+    sample_period : float
+        Sample period (s).
+    warm_up : int, optional
+        Leading samples left out of the comparison.
+
+    Returns
+    -------
+    str
+        ``next`` or ``same``, the one with the lower RMSE.
     """
     from hystmpc.models.record_fit import evaluate
     rmse = {}
@@ -180,6 +236,26 @@ def shows_resonance(u, y, sample_period: float, alignment: str, delays, warm_up:
 
     The second-order fit must beat the first-order one by 2 % in RMSE (on a Prandtl–Ishlinskii
     start).
+
+    Parameters
+    ----------
+    u, y : array_like
+        The record.
+    sample_period : float
+        Sample period (s).
+    alignment : str
+        ``next`` or ``same``.
+    delays : sequence of int
+        Dead times tried (samples).
+    warm_up : int, optional
+        Leading samples left out of the fits.
+
+    Returns
+    -------
+    shows : bool
+        Whether the second-order block wins.
+    why : str
+        Both blocks' RMSE and the second-order one's frequency and damping, for a message.
     """
     from hystmpc.models.record_fit import fit_block, refine
     record = Record(np.asarray(u, float), np.asarray(y, float), sample_period, alignment, warm_up)
@@ -197,8 +273,22 @@ def require_resonance(u, y, sample_period: float, alignment: str, delays, warm_u
                       fast: tuple | None = None) -> None:
     """``ValueError`` unless the record shows a second-order block's resonance.
 
-    The record checked is ``fast``, the dynamics record, when given; the test is
-    :func:`shows_resonance`.
+    The test is :func:`shows_resonance`.
+
+    Parameters
+    ----------
+    u, y : array_like
+        The record.
+    sample_period : float
+        Sample period (s).
+    alignment : str
+        ``next`` or ``same``.
+    delays : sequence of int
+        Dead times tried (samples).
+    warm_up : int, optional
+        Leading samples of ``(u, y)`` left out (not applied to ``fast``).
+    fast : tuple of array_like, optional
+        ``(u, y)`` of the dynamics record: checked instead of ``(u, y)`` when given.
     """
     shows, why = shows_resonance(*(fast or (u, y)), sample_period, alignment, delays, 0 if fast else warm_up)
     if not shows:
@@ -222,20 +312,27 @@ def identify(name: str, u, y, sample_period: float, options: dict | None = None,
         Sample period of the record (s).
     options : dict, optional
         The family's fit options (:attr:`Family.options`).
-    dynamics : str
+    dynamics : str, optional
         ``none``, ``first-order`` or ``second-order``: the block after the hysteresis.
     dynamics_data : tuple of array_like, optional
         ``(u, y)`` of a faster record for the block (default: the same record).
-    max_delay : int
+    max_delay : int, optional
         Largest dead time tried (samples).
-    alignment : str
+    alignment : str, optional
         ``next``, ``same`` or ``auto`` (the module docstring).
-    warm_up : int
+    warm_up : int, optional
         Leading samples simulated but left out of the fit.
-    check_resonance : bool
+    check_resonance : bool, optional
         With ``second-order``, refuse (``ValueError``) a record that does not show a resonance.
-    creep : bool
-        Fit a Grünwald–Letnikov creep ``D^(−α)`` after the hysteresis too (fckp has its own).
+    creep : bool, optional
+        Fit a Grünwald–Letnikov creep ``D^(−α)`` after the hysteresis too (fckp has its own; not
+        for kp or power-function).
+
+    Returns
+    -------
+    Identified
+        The model, with its RMSE and sample count after the warm-up, the alignment it was read
+        with and notes (parameters at a search bound, the dynamics' own fit).
 
     Raises
     ------

@@ -75,8 +75,23 @@ class Ranking:
 def validation_prediction(identified, fit_u, u_val, continue_state: bool, warm_up: int) -> np.ndarray:
     """The model's output on the validation inputs.
 
-    From rest at their first input (the first ``warm_up`` samples left out), or continuing the
-    fit record's state.
+    Parameters
+    ----------
+    identified : Identified or NaiveModel
+        The model (anything with ``predict(u)``).
+    fit_u : array_like
+        Inputs of the fit record.
+    u_val : array_like
+        Validation inputs.
+    continue_state : bool
+        Continue the fit record's state; otherwise start from rest at the first validation input.
+    warm_up : int
+        Leading validation samples left out when starting from rest.
+
+    Returns
+    -------
+    ndarray
+        The modelled output on the validation inputs (after the warm-up when from rest).
     """
     u_val = np.asarray(u_val, float)
     if continue_state:
@@ -85,7 +100,26 @@ def validation_prediction(identified, fit_u, u_val, continue_state: bool, warm_u
 
 
 def validation_rmse(identified, fit_u, validation: tuple, continue_state: bool, warm_up: int) -> float:
-    """RMSE on the validation record ``(u, y)`` (:func:`validation_prediction`)."""
+    """RMSE on the validation record ``(u, y)`` (:func:`validation_prediction`).
+
+    Parameters
+    ----------
+    identified : Identified or NaiveModel
+        The model (anything with ``predict(u)``).
+    fit_u : array_like
+        Inputs of the fit record.
+    validation : tuple of array_like
+        ``(u, y)`` of the validation record.
+    continue_state : bool
+        Continue the fit record's state; otherwise start from rest.
+    warm_up : int
+        Leading validation samples left out when starting from rest.
+
+    Returns
+    -------
+    float
+        The RMSE (output units).
+    """
     predicted = validation_prediction(identified, fit_u, validation[0], continue_state, warm_up)
     y_val = np.asarray(validation[1], float)[len(validation[1]) - len(predicted):]
     return float(np.sqrt(np.mean((predicted - y_val) ** 2)))
@@ -103,7 +137,18 @@ class NaiveModel:
     rmse: float = float("nan")
 
     def predict(self, u) -> np.ndarray:
-        """Modelled output for ``u`` from rest at ``u[0]``."""
+        """Modelled output for ``u`` from rest at ``u[0]``.
+
+        Parameters
+        ----------
+        u : array_like
+            Input at each sample.
+
+        Returns
+        -------
+        ndarray
+            The modelled output at each sample.
+        """
         u = np.asarray(u, float)
         return respond(self.gain * u + self.offset, self.dynamics,
                        Record(u, u, self.sample_period, self.alignment))
@@ -113,7 +158,25 @@ def naive_model(u, y, sample_period: float, alignment: str = "next", max_delay: 
                 ) -> NaiveModel:
     """The :class:`NaiveModel` fitted to the record, by the same least squares as the families.
 
-    Its parameters: a gain of either sign, a lag, a dead time up to ``max_delay`` and an offset.
+    Its parameters: a gain of either sign, a lag, a dead time and an offset.
+
+    Parameters
+    ----------
+    u, y : array_like
+        The record.
+    sample_period : float
+        Sample period (s).
+    alignment : str, optional
+        ``next`` or ``same``.
+    max_delay : int, optional
+        Largest dead time tried (samples).
+    warm_up : int, optional
+        Leading samples left out of the fit.
+
+    Returns
+    -------
+    NaiveModel
+        The fitted model, with its RMSE after the warm-up.
     """
     from hystmpc.models.fit_plays import linear_problem
     record = Record(np.asarray(u, float), np.asarray(y, float), sample_period, alignment, warm_up)
@@ -125,8 +188,7 @@ def naive_model(u, y, sample_period: float, alignment: str = "next", max_delay: 
 def _one_blas_thread() -> None:
     """BLAS on one thread in a worker.
 
-    The matrices are small, and threads of two workers on two cores wait for each other (three
-    times slower here).
+    The matrices are small, and threads of two workers on two cores wait for each other.
     """
     from threadpoolctl import threadpool_limits
     threadpool_limits(1, user_api="blas")
@@ -160,14 +222,26 @@ def identify_auto(u, y, sample_period: float, validation: tuple | None = None, c
         The record, as for :func:`hystmpc.models.identification.identify`.
     validation : tuple of array_like, optional
         ``(u, y)`` of a validation record; default: the record's last ``HOLD_OUT``.
-    continue_state : bool
+    continue_state : bool, optional
         The validation record continues the fit record (the model's state carries over).
+    families : list of str, optional
+        Families to fit (default: every one of :data:`FAMILIES`).
     options : dict, optional
         Fit options per family name.
     dynamics, dynamics_data, max_delay, alignment, warm_up, creep
         As for :func:`hystmpc.models.identification.identify` (the resonance check runs once).
-    workers : int
+    workers : int, optional
         Families fitted at once, each in its own process.
+
+    Returns
+    -------
+    Ranking
+        The candidates, best first (those without a model last), and the naive model's row.
+
+    Raises
+    ------
+    FitError
+        When no family gives a model.
     """
     u, y = check_data(u, y, sample_period)
     how = "the validation record" + (", continuing the fit record's state" if continue_state else "")

@@ -17,10 +17,15 @@ def rk4(rhs, x, h: float, substeps: int = 1, t: float = 0.0):
         State at ``t``.
     h : float
         Step length (s).
-    substeps : int
-        Number of steps; the result is the state at ``t + substeps·h``.
-    t : float
+    substeps : int, optional
+        Number of steps (at least 1).
+    t : float, optional
         Time at the start (only passed on to ``rhs``).
+
+    Returns
+    -------
+    array_like or casadi.SX
+        The state at ``t + substeps·h``, of the type of ``x``.
     """
     if substeps < 1:
         raise ValueError(f"substeps must be >= 1, got {substeps}")

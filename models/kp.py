@@ -21,7 +21,20 @@ from hystmpc.models.smooth import smooth_clip, smooth_max, smooth_min
 
 
 def ridge(tau, delta: float):
-    """Ridge function φ_R of eq. (7) (NumPy)."""
+    """Ridge function φ_R of eq. (7) (NumPy).
+
+    Parameters
+    ----------
+    tau : float or array_like
+        Distance of the input above the threshold.
+    delta : float
+        Slope parameter δ > 0.
+
+    Returns
+    -------
+    ndarray
+        φ(τ), in [−1, 1].
+    """
     return np.clip(-1.0 + 2.0 * np.asarray(tau, float) / delta, -1.0, 1.0)
 
 
@@ -30,6 +43,22 @@ def paper_density(rho1, rho2, c: float = 2.0, sigma: float = 1.0, scale: float =
 
     Read from the garbled text as the usual product of two Cauchy factors; it is positive
     and largest for kernels with a high ρ1 and a low ρ2 (narrow loops).
+
+    Parameters
+    ----------
+    rho1, rho2 : array_like
+        Kernel thresholds.
+    c : float, optional
+        Centre parameter ``c``.
+    sigma : float, optional
+        Width parameter ``σ``.
+    scale : float, optional
+        Peak value.
+
+    Returns
+    -------
+    ndarray
+        The density at each kernel.
     """
     rho1, rho2 = np.asarray(rho1, float), np.asarray(rho2, float)
     return scale / ((1 + ((rho1 - c) / (c * sigma)) ** 2) * (1 + ((rho2 + c) / (c * sigma)) ** 2))
@@ -39,8 +68,22 @@ def threshold_grid(levels: int, delta: float, max_span: int | None = None, low: 
                    high: float = 1.0):
     """Pairs (ρ1, ρ2), ρ1 < ρ2, on ``levels`` thresholds in [low, high − δ].
 
-    ``max_span`` keeps only pairs at most that many grid steps apart (narrower loops, fewer
-    kernels); None keeps every pair.
+    Parameters
+    ----------
+    levels : int
+        Number of thresholds, >= 2.
+    delta : float
+        Slope parameter δ, in (0, high − low).
+    max_span : int, optional
+        Keep only pairs at most that many grid steps apart (narrower loops, fewer kernels);
+        None keeps every pair.
+    low, high : float, optional
+        Ends of the input range.
+
+    Returns
+    -------
+    rho1, rho2 : ndarray
+        Thresholds of each pair.
     """
     if levels < 2:
         raise ValueError(f"levels must be >= 2, got {levels}")
@@ -107,12 +150,35 @@ class KrasnoselskiiPokrovskii(SteppedModel):
         """State after a monotone rise to ``u0`` from below every threshold.
 
         All kernels are at −1 when ``u0`` is below every ρ2.
+
+        Parameters
+        ----------
+        u0 : float
+            Input the state rests at.
+
+        Returns
+        -------
+        ndarray
+            ``[u0, ξ_1, …, ξ_n]``.
         """
         u0 = float(u0)
         return np.concatenate(([u0], ridge(u0 - self.rho2, self.delta)))
 
     def kernels_step(self, state, u: float) -> np.ndarray:
-        """Kernel outputs ξ after moving the input to ``u`` (eq. (6)); also on CasADi expressions."""
+        """Kernel outputs ξ after moving the input to ``u`` (eq. (6)); also on CasADi expressions.
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            State before the move.
+        u : float or CasADi expression
+            New input.
+
+        Returns
+        -------
+        ndarray or CasADi expression
+            ξ_1..ξ_n after the move.
+        """
         if symbolic(state) or symbolic(u):
             u_last, xi = state[0], state[1:]
             rising = builtin_max(xi, clip(-1.0 + 2.0 * (u - ca.DM(self.rho2)) / self.delta, -1.0, 1.0))
@@ -128,7 +194,23 @@ class KrasnoselskiiPokrovskii(SteppedModel):
     def step(self, state, u: float, weights=None) -> tuple[np.ndarray, float]:
         """Exact step to input ``u``; returns ``(state, κ)``.
 
-        ``weights`` replaces the density (for adaptive estimates of it).
+        Also on CasADi expressions (without ``weights``).
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            State before the step.
+        u : float or CasADi expression
+            New input (finite).
+        weights : array_like, optional
+            Replaces the density (for adaptive estimates of it); NumPy states only.
+
+        Returns
+        -------
+        state : ndarray or CasADi expression
+            State after the step.
+        y : float or CasADi expression
+            Output κ after the step.
         """
         if symbolic(state) or symbolic(u):
             if weights is not None:
@@ -141,7 +223,18 @@ class KrasnoselskiiPokrovskii(SteppedModel):
         return np.concatenate(([u], xi)), float((self.weights if weights is None else weights) @ xi)
 
     def output(self, state):
-        """κ of a state (NumPy or CasADi)."""
+        """κ of a state (NumPy or CasADi).
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            A state.
+
+        Returns
+        -------
+        float or CasADi expression
+            κ with the model's own weights.
+        """
         if symbolic(state):
             return ca.dot(ca.DM(self.weights), state[1:])
         return float(self.weights @ np.asarray(state[1:], float))
@@ -152,6 +245,24 @@ class KrasnoselskiiPokrovskii(SteppedModel):
         The direction is ``s = tanh(Δu / direction_eps)``; the rising and falling updates are
         blended by ``(1 ± s)/2``, so a standing input keeps the average of both, which equals
         ξ away from the ridges.
+
+        Parameters
+        ----------
+        u_last : float or CasADi expression
+            Last input.
+        xi : ndarray or CasADi expression
+            Kernel outputs before the move.
+        u : float or CasADi expression
+            New input.
+        eps : float
+            Width of the smoothed ridge and max/min.
+        direction_eps : float
+            Width of the direction detection.
+
+        Returns
+        -------
+        ndarray or CasADi expression
+            Smoothed kernel outputs after the move.
         """
         s = ca.tanh((u - u_last) / direction_eps)
         up = smooth_max(xi, smooth_clip(-1.0 + 2.0 * (u - self.rho2) / self.delta, 1.0, eps), eps)
@@ -161,9 +272,20 @@ class KrasnoselskiiPokrovskii(SteppedModel):
     def smooth_step(self, eps: float, direction_eps: float | None = None) -> ca.Function:
         """Smooth step ``(state, u) -> (state_next, κ)`` as a CasADi Function.
 
-        Ridge, max/min and direction smoothed (:meth:`smooth_kernels`; direction width
-        ``direction_eps``, default ``eps``). The output error is O(eps) on a reversing input
-        (measured for the DEA's model: 0.038, 0.0040, 0.00041 mm at eps = 1e-2, 1e-3, 1e-4).
+        Ridge, max/min and direction smoothed (:meth:`smooth_kernels`). The output error is
+        O(eps) on a reversing input.
+
+        Parameters
+        ----------
+        eps : float
+            Width of the smoothed ridge and max/min, > 0.
+        direction_eps : float, optional
+            Width of the direction detection (default: ``eps``).
+
+        Returns
+        -------
+        casadi.Function
+            ``(state, u) -> (state_next, y)``.
         """
         check_smoothing(eps, direction_eps)
         direction_eps = direction_eps or eps
@@ -180,9 +302,28 @@ class KrasnoselskiiPokrovskii(SteppedModel):
 
         Moves the input up (or down) from ``u_last`` in steps of ``step`` until the model
         output reaches ``y_target``, then refines within the last step by bisection; returns
-        the bound when the target is beyond what the range can reach. ``weights`` as in
-        :meth:`step`. On CasADi expressions (a generated controller) :meth:`bisection_inverse`,
-        with the model's own weights.
+        the bound when the target is beyond what the range can reach. On CasADi expressions (a
+        generated controller) :meth:`bisection_inverse`, with the model's own weights.
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            State to move from.
+        y_target : float or CasADi expression
+            Output to reach (finite).
+        u_min, u_max : float, optional
+            Input range.
+        step : float, optional
+            Search step ζ (NumPy only).
+        weights : array_like, optional
+            Replaces the density, as in :meth:`step` (NumPy only).
+
+        Returns
+        -------
+        state : ndarray or CasADi expression
+            State after the move.
+        u : float or CasADi expression
+            The input.
         """
         if symbolic(state) or symbolic(y_target):
             if weights is not None:
@@ -217,13 +358,31 @@ class KrasnoselskiiPokrovskii(SteppedModel):
                           iterations: int = 44):
         """An input that reaches ``y_target`` from ``state`` by bisection, and the state after it.
 
-        Returns ``(state, u)``, on CasADi expressions (the same arithmetic as the generated C).
+        On CasADi expressions (the same arithmetic as the generated C).
 
         The output moves monotonically with the input in the direction of the target, so
         ``iterations`` halvings of ``[u_last, bound]`` (width at most 2) find the input where the
         target is first reached to ``2^-iterations`` of that width (44: about 1e-13); a target
         beyond the bound gives the bound, as :meth:`inverse_step` does. The halvings run as a
         CasADi fold: generated C keeps one loop, not ``iterations`` copies.
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            State to move from.
+        y_target : float or CasADi expression
+            Output to reach.
+        u_min, u_max : float, optional
+            Input range.
+        iterations : int, optional
+            Number of halvings.
+
+        Returns
+        -------
+        state : casadi.DM or CasADi expression
+            State after the move.
+        u : casadi.DM or CasADi expression
+            The input.
         """
         n = self.n_kernels + 1
         x, target, up = ca.SX.sym("state", n), ca.SX.sym("target"), ca.SX.sym("up")

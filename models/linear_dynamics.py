@@ -46,13 +46,27 @@ class LinearDynamics:
             raise ValueError(f"delay_samples must be an integer in [0, 1000], got {self.delay_samples}")
 
     def parameters(self) -> dict:
-        """The named parameters of this kind (for model and result documents)."""
+        """The named parameters of this kind (for model and result documents).
+
+        Returns
+        -------
+        dict
+            ``kind``, the kind's keys (:data:`KIND_KEYS`) and ``delay_samples``.
+        """
         kind = {"none": {}, "first-order": {"time_constant": self.time_constant},
                 "second-order": {"natural_frequency_hz": self.natural_frequency_hz, "damping": self.damping}}
         return {"kind": self.kind, **kind[self.kind], "delay_samples": self.delay_samples}
 
     def state_space(self) -> tuple[np.ndarray, np.ndarray]:
-        """Continuous ``(A, B)`` with state ``[y]`` or ``[y, y']`` and input ``h``."""
+        """Continuous ``(A, B)`` with state ``[y]`` or ``[y, y']`` and input ``h``.
+
+        Returns
+        -------
+        A : ndarray
+            State matrix, ``(n, n)``.
+        B : ndarray
+            Input vector, ``(n,)``.
+        """
         if self.kind == "first-order":
             return np.array([[-1.0 / self.time_constant]]), np.array([1.0 / self.time_constant])
         wn, zeta = 2 * np.pi * self.natural_frequency_hz, self.damping
@@ -63,8 +77,18 @@ class LinearDynamics:
 
         That is a zero-order hold, which is what an input-driven hysteresis gives.
 
-        For ``none``: None, or with ``hold`` one state that holds ``h`` until the next sample
-        (the same output; a creep model needs its output to be a state).
+        Parameters
+        ----------
+        sample_period : float
+            Sample period (s).
+        hold : bool, optional
+            For ``none``, one state that holds ``h`` until the next sample (the same output; a
+            creep model needs its output to be a state).
+
+        Returns
+        -------
+        Dynamics or None
+            The discrete block; None for ``none`` without ``hold``.
         """
         if self.kind == "none":
             if not hold:
@@ -85,7 +109,13 @@ class LinearDynamics:
                         output=lambda x, h: x[0], steady_input=lambda y: y, discrete=True)
 
     def dynamics(self) -> Dynamics | None:
-        """The block as continuous :class:`Dynamics` (None for ``none``)."""
+        """The block as continuous :class:`Dynamics` (None for ``none``).
+
+        Returns
+        -------
+        Dynamics or None
+            The block, states ``output`` (and ``rate`` for second order), or None for ``none``.
+        """
         if self.kind == "first-order":
             tau = self.time_constant
             return Dynamics(("output",), lambda x, u, h, d: [(h - x[0]) / tau], output=lambda x, h: x[0],
@@ -104,6 +134,16 @@ class LinearDynamics:
         left between an inverse hysteresis compensation and the output, for a linear MPC. States:
         the block's (``output`` for ``none``: the output follows ``h`` one sample later) and
         ``delay_1..delay_D``; sensor: the output.
+
+        Parameters
+        ----------
+        sample_period : float
+            Sample period (s).
+
+        Returns
+        -------
+        PredictionModel
+            Step ``(x, u, d) -> x_next`` with ``u`` the virtual input ``v``; output and sensor ``x[0]``.
         """
         import casadi as ca
 
@@ -121,7 +161,13 @@ class LinearDynamics:
             state_names=(*block.state_names, *(f"delay_{i + 1}" for i in range(D))))
 
     def lag(self) -> float:
-        """Low-frequency group delay (s) of the block, dead time not included (a feed-forward's preview)."""
+        """Low-frequency group delay (s) of the block, dead time not included (a feed-forward's preview).
+
+        Returns
+        -------
+        float
+            0, τ, or ``2ζ/ω_n`` (s).
+        """
         return {"none": 0.0, "first-order": self.time_constant,
                  "second-order": 2 * self.damping / (2 * np.pi * self.natural_frequency_hz)}[self.kind]
 
@@ -130,7 +176,21 @@ class LinearDynamics:
 
         The hold is a zero-order hold, so ``y_k`` depends on ``h_{k-1}`` and earlier. The output
         comes after the dead time, from rest at zero, or with ``from_steady_state`` at rest at ``h_0``
-        (a record that starts with the actuator settled). ``h`` may hold one signal per column.
+        (a record that starts with the actuator settled).
+
+        Parameters
+        ----------
+        h : array_like
+            Hysteresis output at each sample; may hold one signal per column.
+        sample_period : float
+            Sample period (s).
+        from_steady_state : bool, optional
+            Start at rest at ``h_0``.
+
+        Returns
+        -------
+        ndarray
+            The output at each sample, of the shape of ``h``.
         """
         from scipy.signal import lfilter
 
@@ -153,6 +213,18 @@ class LinearDynamics:
 
         A first-order lag's pole ``e^{−T/τ}``; a second-order block's partial fractions over its two
         poles, exact to about ``1e-16 / |ζ − 1|`` relative, a double pole's own form at ``ζ = 1``.
+
+        Parameters
+        ----------
+        sample_period : float
+            Sample period (s).
+
+        Returns
+        -------
+        b : ndarray
+            Numerator coefficients (no feed-through: ``b[0] = 0``).
+        a : ndarray
+            Denominator coefficients, ``a[0] = 1``.
         """
         if self.kind == "first-order":
             pole = np.exp(-sample_period / self.time_constant)

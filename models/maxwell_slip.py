@@ -59,14 +59,38 @@ class MaxwellSlip(SteppedModel):
         return float(sum(self.w))
 
     def initial_state(self, u0: float = 0.0, forces=None) -> np.ndarray:
-        """State at input ``u0`` with the given element forces (default: relaxed, all zero)."""
+        """State at input ``u0`` with the given element forces (default: relaxed, all zero).
+
+        Parameters
+        ----------
+        u0 : float, optional
+            Input.
+        forces : array_like, optional
+            The ``M`` element forces (another length: ``ValueError``); None: all zero.
+
+        Returns
+        -------
+        ndarray
+            ``[u0, F_1, ..., F_M]``.
+        """
         f = np.zeros(self.n_elements) if forces is None else np.asarray(forces, float)
         if f.shape != (self.n_elements,):
             raise ValueError(f"forces must have {self.n_elements} entries, got {f.shape}")
         return np.concatenate(([float(u0)], f))
 
     def output(self, state):
-        """Output ``Σ F_i`` of a state (NumPy or CasADi)."""
+        """Output ``Σ F_i`` of a state (NumPy or CasADi).
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            ``[u_last, F_1, ..., F_M]``.
+
+        Returns
+        -------
+        float or CasADi expression
+            The output.
+        """
         if symbolic(state):
             return ca.sum1(state[1:])
         return float(np.sum(np.asarray(state)[1:]))
@@ -82,6 +106,13 @@ class MaxwellSlip(SteppedModel):
             ``[u_last, F_1, ..., F_M]``.
         u : float
             New input.
+
+        Returns
+        -------
+        state : ndarray or CasADi expression
+            ``[u, F_1, ..., F_M]`` after the step.
+        y : float or CasADi expression
+            Output ``Σ F_i`` after the step.
         """
         k = np.asarray(self.k)
         w = np.asarray(self.w)
@@ -97,6 +128,20 @@ class MaxwellSlip(SteppedModel):
 
         Works on CasADi symbols and on NumPy values alike; each element's error against the
         exact step is at most ``eps / 2`` per call (see :func:`hystmpc.models.smooth.smooth_clip`).
+
+        Parameters
+        ----------
+        forces : sequence
+            The ``M`` element forces before the move.
+        u_from, u_to : float or CasADi expression
+            Input before and after the move.
+        eps : float
+            Smoothing width of each clip (output units: it acts on the forces).
+
+        Returns
+        -------
+        list
+            The ``M`` element forces after the move.
         """
         return [
             smooth_clip(forces[i] + self.k[i] * (u_to - u_from), self.w[i], eps)
@@ -107,8 +152,19 @@ class MaxwellSlip(SteppedModel):
         """Smooth step as a CasADi Function ``(state, u) -> (state_next, y)``.
 
         Over ``n`` steps the output error against :meth:`step` is at most ``n·M·eps/2``
-        (each smoothed clip errs by at most ``eps/2`` and is 1-Lipschitz). The model has
-        no direction detection, so ``direction_eps`` must stay unset.
+        (each smoothed clip errs by at most ``eps/2`` and is 1-Lipschitz).
+
+        Parameters
+        ----------
+        eps : float
+            Smoothing width of each element's clip (output units), > 0.
+        direction_eps : None
+            Must stay unset: the model has no direction detection (``ValueError`` otherwise).
+
+        Returns
+        -------
+        casadi.Function
+            ``(state, u) -> (state_next, y)``.
         """
         check_smoothing(eps, direction_eps, has_direction=False)
 
@@ -121,7 +177,22 @@ class MaxwellSlip(SteppedModel):
         """Input that moves the output from ``state`` to ``y_target``, and the new state.
 
         The output is monotone and piecewise linear in ``u`` along a monotone input path, so
-        the inverse is exact. Targets outside ``(-Σw, Σw)`` are unreachable: ``ValueError``.
+        the inverse is exact. Targets outside ``(-Σw, Σw)`` are unreachable: ``ValueError``
+        (on CasADi expressions: :meth:`symbolic_inverse_step`, a NaN input).
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            State to move from.
+        y_target : float or CasADi expression
+            Output to reach.
+
+        Returns
+        -------
+        state : ndarray or CasADi expression
+            State after the move.
+        u : float or CasADi expression
+            The input.
         """
         if symbolic(state) or symbolic(y_target):
             return self.symbolic_inverse_step(state, y_target)
@@ -139,6 +210,20 @@ class MaxwellSlip(SteppedModel):
         ``δ = 0`` and the one at each element's break point. So the ``δ`` that reaches the
         target is the largest of the rising lines' crossings. A target outside ``(−Σw, Σw)``
         gives a NaN input (the NumPy steps raise ``ValueError``).
+
+        Parameters
+        ----------
+        state : CasADi expression
+            State to move from.
+        y_target : float or CasADi expression
+            Output to reach.
+
+        Returns
+        -------
+        state : CasADi expression
+            State after the move.
+        u : CasADi expression
+            The input.
         """
         k, w = ca.DM(self.k), ca.DM(self.w)
         u0, forces = state[0], state[1:]
@@ -161,7 +246,26 @@ class MaxwellSlip(SteppedModel):
 
         ``output_of`` must be continuous, monotone and piecewise linear in ``u`` with kinks
         only where an element saturates, and grow with ``tail_slope`` once all have
-        (0: bounded, the target must be reached before). Returns ``(state, u)``.
+        (0: bounded, the target must be reached before).
+
+        Parameters
+        ----------
+        state : array_like
+            State to move from.
+        y_target : float
+            Output to reach.
+        output_of : callable
+            ``(u, forces) -> float``: the output at input ``u`` with element forces ``forces``.
+        tail_slope : float
+            Slope of ``output_of`` in ``u`` once every element saturates; 0: bounded (a target not
+            bracketed before raises ``RuntimeError``).
+
+        Returns
+        -------
+        state : ndarray
+            State after the move.
+        u : float
+            The input.
         """
         state = np.asarray(state, float)
         u0, forces = float(state[0]), state[1:]
@@ -187,7 +291,22 @@ class MaxwellSlip(SteppedModel):
 
 
 def play_operator(u_seq, r: float, z0: float = 0.0) -> np.ndarray:
-    """Backlash (play) operator of half-width ``r``: ``z <- clip(z, u - r, u + r)``."""
+    """Backlash (play) operator of half-width ``r``: ``z <- clip(z, u - r, u + r)``.
+
+    Parameters
+    ----------
+    u_seq : array_like
+        Input sequence.
+    r : float
+        Half-width (input units).
+    z0 : float, optional
+        Output before the first input.
+
+    Returns
+    -------
+    ndarray
+        Output ``z`` after each input.
+    """
     out = np.empty(len(u_seq))
     z = z0
     for i, u in enumerate(u_seq):

@@ -45,14 +45,40 @@ class ParametricHysteresis(SteppedModel):
     last output."""
 
     def initial_state(self, u0: float = 0.0, v0: float | None = None, direction: float = 1.0) -> np.ndarray:
-        """Memory at an extremum (u0, v0) (default v0 = u0: demagnetised) moving in ``direction``."""
+        """Memory at an extremum (u0, v0) (default v0 = u0: demagnetised) moving in ``direction``.
+
+        Parameters
+        ----------
+        u0 : float, optional
+            Input at the extremum.
+        v0 : float, optional
+            Output at the extremum, within ``p1`` of ``u0`` (else ``ValueError``); None: ``u0``.
+        direction : float, optional
+            Direction since the extremum: +1 for ``direction >= 0``, else -1.
+
+        Returns
+        -------
+        ndarray
+            ``[u0, ±1, u0, v0, v0]``.
+        """
         v0 = u0 if v0 is None else v0
         if abs(v0 - u0) > self.p1:
             raise ValueError(f"|v0 - u0| = {abs(v0 - u0)} exceeds p1 = {self.p1}: outside the asymptotes")
         return np.array([u0, 1.0 if direction >= 0 else -1.0, u0, v0, v0])
 
     def output(self, state):
-        """Output of a state (NumPy or CasADi)."""
+        """Output of a state (NumPy or CasADi).
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            A state.
+
+        Returns
+        -------
+        float or CasADi expression
+            Its last output ``v_last``.
+        """
         return state[4] if symbolic(state) else float(state[4])
 
     @staticmethod
@@ -70,7 +96,22 @@ class ParametricHysteresis(SteppedModel):
         return s, u0, v0
 
     def direct(self, u, s, u0, v0):
-        """Eq. (3) for given memory; NumPy or CasADi arguments."""
+        """Eq. (3) for given memory; NumPy or CasADi arguments.
+
+        Parameters
+        ----------
+        u : float, ndarray or CasADi expression
+            Input; a CasADi ``u`` makes the result an expression.
+        s : float or CasADi expression
+            Direction since the last extremum (±1).
+        u0, v0 : float or CasADi expression
+            Input and output at the last extremum.
+
+        Returns
+        -------
+        float, ndarray or CasADi expression
+            H's output.
+        """
         lib = ca if isinstance(u, (ca.SX, ca.MX)) else np
         w = lambertw_expr if lib is ca else lambertw
         m = self.p1 + s * (v0 - u0)
@@ -78,7 +119,22 @@ class ParametricHysteresis(SteppedModel):
         return u - u0 + v0 + s * (w(self.p2 * m * lib.exp(self.p2 * (m - du))) / self.p2 - m)
 
     def inverse(self, u, s, u0, v0):
-        """Eq. (5) for given memory (the memory of IH's own input and output)."""
+        """Eq. (5) for given memory (the memory of IH's own input and output).
+
+        Parameters
+        ----------
+        u : float, ndarray or CasADi expression
+            IH's input (H's output); a CasADi ``u`` makes the result an expression.
+        s : float or CasADi expression
+            Direction of IH's input since its last extremum (±1).
+        u0, v0 : float or CasADi expression
+            IH's input and output at that extremum.
+
+        Returns
+        -------
+        float, ndarray or CasADi expression
+            IH's output (H's input).
+        """
         lib = ca if isinstance(u, (ca.SX, ca.MX)) else np
         m = self.p1 + s * (u0 - v0)
         du = lib.fabs(u - u0) if lib is ca else abs(u - u0)
@@ -88,6 +144,20 @@ class ParametricHysteresis(SteppedModel):
         """Exact step of H to input ``u``; returns ``(state, v)``.
 
         Both are CasADi expressions when ``state`` or ``u`` is one.
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            ``[u_last, s, u0, v0, v_last]``.
+        u : float or CasADi expression
+            New input.
+
+        Returns
+        -------
+        state : ndarray or CasADi expression
+            State after the step.
+        v : float or CasADi expression
+            Output after the step.
         """
         s, u0, v0 = self._update_memory(state, u)
         if symbolic(s):
@@ -101,6 +171,20 @@ class ParametricHysteresis(SteppedModel):
 
         ``state`` is H's state; IH runs on swapped memory (its input is H's output), which
         is what makes the pair exact inverses.
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            H's state.
+        v_target : float or CasADi expression
+            H's output to reach; must be finite (NumPy: ``ValueError``; CasADi: the input is NaN).
+
+        Returns
+        -------
+        state : ndarray or CasADi expression
+            H's state after the input.
+        u : float or CasADi expression
+            The input.
         """
         if symbolic(state) or symbolic(v_target):  # a non-finite target gives u = NaN
             u_last, s, u0, v0, v_last = (state[i] for i in range(5))
@@ -117,7 +201,20 @@ class ParametricHysteresis(SteppedModel):
         return self.step(state, u)[0], u
 
     def hysteretic_part(self, u_seq, v0_star: float = 0.0) -> np.ndarray:
-        """M[u] of eq. (7) (IH = u + M[u], eq. (6)) from memory ``v0*`` at ``u_seq[0]``."""
+        """M[u] of eq. (7) (IH = u + M[u], eq. (6)) from memory ``v0*`` at ``u_seq[0]``.
+
+        Parameters
+        ----------
+        u_seq : array_like
+            Input sequence.
+        v0_star : float, optional
+            M's output at the starting extremum ``u_seq[0]`` (direction +1).
+
+        Returns
+        -------
+        ndarray
+            M's output at each sample.
+        """
         u_seq = np.asarray(u_seq, float)
         out = np.empty(len(u_seq))
         u0, v0, s, u_last, v_last = u_seq[0], v0_star, 1.0, u_seq[0], v0_star
@@ -140,6 +237,18 @@ class ParametricHysteresis(SteppedModel):
         (u_last, v_last) by the reversal weight ``t²·|target − s|/2``; ``|u − u0|`` is
         ``sqrt((u − u0)² + eps²)``. The error against :meth:`step` is O(eps) once the
         widths are below the input change per step.
+
+        Parameters
+        ----------
+        eps : float
+            Width of the smoothed ``|u − u0|`` (input units), > 0.
+        direction_eps : float, optional
+            Width of the direction detection (input units); None: ``eps``.
+
+        Returns
+        -------
+        casadi.Function
+            ``(state, u) -> (state_next, y)``.
         """
         check_smoothing(eps, direction_eps)
         width = eps if direction_eps is None else direction_eps
@@ -167,6 +276,18 @@ def major_loop(op: ParametricHysteresis, current) -> np.ndarray:
 
     Within each monotone half the memory is constant, so eq. (3) applies in closed form:
     (u0, v0) = (0, 0), s = +1 on the way up, and (i_max, X(i_max)), s = −1 on the way down.
+
+    Parameters
+    ----------
+    op : ParametricHysteresis
+        The operator H.
+    current : array_like
+        Input rising to its maximum and falling back (A); H starts demagnetised at ``current[0]``.
+
+    Returns
+    -------
+    ndarray
+        H's output X at each sample.
     """
     current = np.asarray(current, float)
     top = int(np.argmax(current))
@@ -207,8 +328,13 @@ def major_loop_cost(p1: float, p2: float, loops: dict[float, tuple[np.ndarray, n
         Operator parameters; the air-gap law p2(g) = p2/g (g in m) applies.
     loops : dict
         Per air gap g (m): the current 0 -> max -> 0 (Fig. 9) and the measured force.
-    window : int
+    window : int, optional
         Samples averaged per look-up-table point (1: the paper's plain table).
+
+    Returns
+    -------
+    float
+        Sum over the gaps of the squared differences in X; inf when not finite.
     """
     total = 0.0
     for gap, (current, force) in loops.items():
@@ -229,9 +355,25 @@ def identify_major_loop(loops: dict[float, tuple[np.ndarray, np.ndarray]], p_sta
     """Identify p1, p2 from major loops at several air gaps (Section 3.5, eq. (17)).
 
     Nelder–Mead (as the paper) on log p1, log p2 inside :data:`P1_RANGE` and
-    :data:`P2_RANGE`. ``loops[g] = (current, force)``. Returns ``(p1, p2, luts)`` where
-    ``luts[g] = (F, X)`` is the ascending table of eq. (15) for gap g:
-    X = Lut(F, g) and F = Lut⁻¹(X, g).
+    :data:`P2_RANGE`.
+
+    Parameters
+    ----------
+    loops : dict
+        ``loops[g] = (current, force)`` per air gap g (m): the current 0 -> max -> 0 and the
+        measured force; one gap at least (else ``ValueError``).
+    p_start : tuple of float, optional
+        Starting ``(p1, p2)``.
+    window : int, optional
+        Samples averaged per look-up-table point (1: the paper's plain table).
+
+    Returns
+    -------
+    p1, p2 : float
+        Operator parameters; p2(g) = p2/g.
+    luts : dict
+        ``luts[g] = (F, X)``, the ascending table of eq. (15) for gap g:
+        X = Lut(F, g) and F = Lut⁻¹(X, g).
     """
     from scipy.optimize import minimize
 

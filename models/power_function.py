@@ -110,27 +110,97 @@ class PowerFunctionHysteresis(SteppedModel):
         return [(s, self.torque_scale * t) for s, t in pts]
 
     def tau_ascending(self, s, relu=_exact_relu):
-        """τ_al(s), eq. (14)."""
+        """τ_al(s), eq. (14).
+
+        Parameters
+        ----------
+        s : float, ndarray or CasADi expression
+            Virtual deformation.
+        relu : callable, optional
+            ``max(·, 0)`` at the kinks; a smooth one gives a smooth polyline.
+
+        Returns
+        -------
+        float, ndarray or CasADi expression
+            The torque (times ``torque_scale``).
+        """
         return _polyline(self._points("al"), s, relu)
 
     def tau_descending(self, s, relu=_exact_relu):
-        """τ_dl(s), eq. (15)."""
+        """τ_dl(s), eq. (15).
+
+        Parameters
+        ----------
+        s : float, ndarray or CasADi expression
+            Virtual deformation.
+        relu : callable, optional
+            ``max(·, 0)`` at the kinks; a smooth one gives a smooth polyline.
+
+        Returns
+        -------
+        float, ndarray or CasADi expression
+            The torque (times ``torque_scale``).
+        """
         return _polyline(self._points("dl"), s, relu)
 
     def s_ascending(self, tau):
-        """Inverse of τ_al (eq. (25)): the s on the ascending polyline with torque ``tau``."""
+        """Inverse of τ_al (eq. (25)): the s on the ascending polyline with torque ``tau``.
+
+        Parameters
+        ----------
+        tau : float, ndarray or CasADi expression
+            Torque.
+
+        Returns
+        -------
+        float, ndarray or CasADi expression
+            The virtual deformation.
+        """
         return _polyline([(t, s) for s, t in self._points("al")], tau, _exact_relu)
 
     def s_descending(self, tau):
-        """Inverse of τ_dl (eq. (26))."""
+        """Inverse of τ_dl (eq. (26)).
+
+        Parameters
+        ----------
+        tau : float, ndarray or CasADi expression
+            Torque.
+
+        Returns
+        -------
+        float, ndarray or CasADi expression
+            The s on the descending polyline with torque ``tau``.
+        """
         return _polyline([(t, s) for s, t in self._points("dl")], tau, _exact_relu)
 
     def delta_s1(self, s01):
-        """Width of the transition after a maximum at s01, eq. (11)."""
+        """Width of the transition after a maximum at s01, eq. (11).
+
+        Parameters
+        ----------
+        s01 : float or CasADi expression
+            The maximum's s.
+
+        Returns
+        -------
+        float or CasADi expression
+            Δs1 = k11·s01 + k01.
+        """
         return self.k11 * s01 + self.k01
 
     def delta_s2(self, s02):
-        """Width of the transition after a minimum at s02, eq. (11)."""
+        """Width of the transition after a minimum at s02, eq. (11).
+
+        Parameters
+        ----------
+        s02 : float or CasADi expression
+            The minimum's s.
+
+        Returns
+        -------
+        float or CasADi expression
+            Δs2 = k12·s02 + k02.
+        """
         return self.k12 * s02 + self.k02
 
     exponent_range = (1.0, 4.0)
@@ -139,7 +209,20 @@ class PowerFunctionHysteresis(SteppedModel):
     make the transition's slope infinite at the turning point."""
 
     def exponent(self, s0, eps: float | None = None):
-        """b(s0), eq. (18); the Table VII set is picked by the sign of s0 (blended if ``eps``)."""
+        """b(s0), eq. (18); the Table VII set is picked by the sign of s0 (blended if ``eps``).
+
+        Parameters
+        ----------
+        s0 : float or CasADi expression
+            The turning point.
+        eps : float, optional
+            Width of the ``tanh`` blend of the two sets; None: exact (a float ``s0`` only).
+
+        Returns
+        -------
+        float or CasADi expression
+            b, clamped to :attr:`exponent_range` (smoothly with ``eps``).
+        """
         gp, gn = self.exponent_positive, self.exponent_negative
         bp = gp[0] * s0**2 + gp[1] * s0 + gp[2]
         bn = gn[0] * s0**2 + gn[1] * s0 + gn[2]
@@ -157,7 +240,15 @@ class PowerFunctionHysteresis(SteppedModel):
     def initial_state(self, s0: float | None = None) -> np.ndarray:
         """Resting on the ascending polyline at ``s0`` (default: where τ_al = 0).
 
-        A CasADi ``s0`` gives the state as an expression.
+        Parameters
+        ----------
+        s0 : float or CasADi expression, optional
+            Virtual deformation the state rests at; a CasADi ``s0`` gives the state as an expression.
+
+        Returns
+        -------
+        ndarray or CasADi expression
+            The state ``[s0, 1, s0, s0 − Δs1(s0), τ_al(s0), τ_al(s0)]``.
         """
         if symbolic(s0):
             tau = self.tau_ascending(s0)
@@ -167,7 +258,18 @@ class PowerFunctionHysteresis(SteppedModel):
         return np.array([s0, 1.0, s0, s0 - self.delta_s1(s0), tau, tau])
 
     def output(self, state):
-        """Torque of a state (NumPy or CasADi)."""
+        """Torque of a state (NumPy or CasADi).
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            A state.
+
+        Returns
+        -------
+        float or CasADi expression
+            Its last entry, the torque.
+        """
         return state[5] if symbolic(state) else float(state[5])
 
     def _up_branch(self, s, s01, s02, tau_r):
@@ -236,7 +338,19 @@ class PowerFunctionHysteresis(SteppedModel):
     def step(self, state, s: float) -> tuple[np.ndarray, float]:
         """Exact step to virtual deformation ``s``; returns ``(state, τ)``.
 
-        Both are CasADi expressions when ``state`` or ``s`` is one.
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            State before the step.
+        s : float or CasADi expression
+            New virtual deformation.
+
+        Returns
+        -------
+        state : ndarray or CasADi expression
+            State after the step (an expression when ``state`` or ``s`` is one).
+        tau : float or CasADi expression
+            Torque after the step.
         """
         if symbolic(state) or symbolic(s):
             return self._step_expr(state, s)
@@ -261,8 +375,21 @@ class PowerFunctionHysteresis(SteppedModel):
         points (eqs. (25)–(26)). The inverse turning points are the forward ones mapped
         through the polylines (τ01 = τ_al(s01), τ02 = τ_dl(s02)) instead of eq. (22)'s
         separately fitted l-parameters, which the paper does not list; this makes
-        ``step(state, inverse_step(state, τ)[1])`` return τ to rounding. CasADi arguments
-        give expressions.
+        ``step(state, inverse_step(state, τ)[1])`` return τ to rounding.
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            State to move from.
+        tau : float or CasADi expression
+            Torque to reach (finite; a non-finite CasADi one gives NaN).
+
+        Returns
+        -------
+        state : ndarray or CasADi expression
+            State after the move (expressions for CasADi arguments).
+        s : float or CasADi expression
+            The virtual deformation.
         """
         if symbolic(state) or symbolic(tau):
             return self._inverse_step_expr(state, tau)
@@ -302,18 +429,49 @@ class PowerFunctionHysteresis(SteppedModel):
         polyline kinks and clips can be much wider (``eps``), which is what keeps an NLP
         through this model well conditioned.
 
-        Direction: ``t = tanh(Δs/eps)``; the up-flag moves towards ``(1+t)/2`` by ``t²``,
+        Direction: ``t = tanh(Δs/direction_eps)``; the up-flag moves towards ``(1+t)/2`` by ``t²``,
         so a standing input keeps it. A reversal's weight is ``t²·(1+t)/2·(1−up)`` (and its
         mirror); turning points and τ_r blend towards their updated values by it. Polyline
         kinks use ``smooth_max``; the transition's progress is clipped smoothly into
         ``(s02, s01)``; the Table VII set is blended by ``tanh(s0/eps)``.
+
+        Parameters
+        ----------
+        eps : float
+            Switching width (in s), > 0.
+        direction_eps : float, optional
+            Width of the direction detection on Δs (default: ``eps``).
+
+        Returns
+        -------
+        casadi.Function
+            ``(state, u) -> (state_next, y)``.
         """
         check_smoothing(eps, direction_eps)
         return smooth_function("power_function_smooth", 6,
                                lambda state, s: self.smooth_expressions(state, s, eps, direction_eps))
 
     def smooth_expressions(self, state, s, eps: float, direction_eps: float | None = None):
-        """CasADi expressions of :meth:`smooth_step` (for embedding in larger models)."""
+        """CasADi expressions of :meth:`smooth_step` (for embedding in larger models).
+
+        Parameters
+        ----------
+        state : CasADi expression
+            State before the step.
+        s : CasADi expression
+            New virtual deformation.
+        eps : float
+            Switching width (in s).
+        direction_eps : float, optional
+            Width of the direction detection (default: ``eps``).
+
+        Returns
+        -------
+        state_next : CasADi expression
+            State after the step.
+        tau : CasADi expression
+            Torque after the step.
+        """
         s_last, up, s01, s02, tau_r, tau_last = (state[i] for i in range(6))
 
         def relu(x):
@@ -364,7 +522,20 @@ class VirtualDeformation:
     """Table V units per m²."""
 
     def s(self, theta, xp=np):
-        """s(θ1), eq. (8), scaled; works on NumPy and CasADi values."""
+        """s(θ1), eq. (8), scaled; works on NumPy and CasADi values.
+
+        Parameters
+        ----------
+        theta : float, ndarray or CasADi expression
+            θ1 (rad).
+        xp : module, optional
+            ``numpy`` or ``casadi``, whose ``sin`` and ``cos`` are used.
+
+        Returns
+        -------
+        float, ndarray or CasADi expression
+            s in Table V's units.
+        """
         r, k = self.pinion_radius, self.stiffness
         return self.scale * (4 * r**2 * xp.sin(theta) * (1 - xp.cos(theta))
                              + 2 * self.pretension * r * xp.sin(theta) / k)
@@ -372,7 +543,16 @@ class VirtualDeformation:
     def theta(self, s) -> np.ndarray:
         """Inverse of :meth:`s` on |θ1| < π/2 (s is odd and increasing there), by Newton steps.
 
-        For a CasADi ``s``: the same steps as an expression, through :meth:`theta_function`.
+        Parameters
+        ----------
+        s : float, array_like or CasADi expression
+            Virtual deformation (Table V's units); a CasADi ``s`` takes the same steps as an
+            expression, through :meth:`theta_function`.
+
+        Returns
+        -------
+        ndarray or CasADi expression
+            θ1 (rad), of the shape of ``s`` (a column for a CasADi ``s``).
         """
         if symbolic(s):
             theta = self.theta_function()  # one Function, called per element: small C
@@ -395,6 +575,11 @@ class VirtualDeformation:
 
         The 50 Newton steps of :meth:`theta` unrolled, each applied only until one is below 1e-15
         (as the loop's ``break``).
+
+        Returns
+        -------
+        casadi.Function
+            ``s -> θ1`` on a scalar.
         """
         s = ca.SX.sym("s")
         r, k = self.pinion_radius, self.stiffness

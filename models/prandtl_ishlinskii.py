@@ -68,18 +68,55 @@ class PrandtlIshlinskii(SteppedModel):
         return ("u_last", *(f"force_{i + 1}" for i in range(len(self.weights))))
 
     def initial_state(self, u0: float = 0.0) -> np.ndarray:
-        """Virgin state at ``u0``: every play centred on the input."""
+        """Virgin state at ``u0``: every play centred on the input.
+
+        Parameters
+        ----------
+        u0 : float, optional
+            Input.
+
+        Returns
+        -------
+        ndarray
+            ``[u0, 0, …, 0]``: no force in any element.
+        """
         return np.concatenate(([float(u0)], np.zeros(len(self.weights))))
 
     def output(self, state):
-        """Output of a state (NumPy or CasADi)."""
+        """Output of a state (NumPy or CasADi).
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            ``[u_last, F_1, …, F_n]``.
+
+        Returns
+        -------
+        float or CasADi expression
+            ``gain·u_last − Σ F_i``.
+        """
         if symbolic(state):
             return self.gain * state[0] - ca.sum1(state[1:])
         state = np.asarray(state, float)
         return float(self.gain * state[0] - np.sum(state[1:]))
 
     def step(self, state, u: float) -> tuple[np.ndarray, float]:
-        """Exact step to input ``u``; returns ``(state, y)`` (CasADi expressions when ``state`` or ``u`` is one)."""
+        """Exact step to input ``u``; returns ``(state, y)`` (CasADi expressions when ``state`` or ``u`` is one).
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            State before the step.
+        u : float or CasADi expression
+            New input.
+
+        Returns
+        -------
+        state : ndarray or CasADi expression
+            State after the step.
+        y : float or CasADi expression
+            Output after the step.
+        """
         if symbolic(state) or symbolic(u):
             if not self.weights:
                 return ca.vertcat(u), self.linear_gain * u
@@ -94,8 +131,19 @@ class PrandtlIshlinskii(SteppedModel):
         """Smooth step ``(state, u) -> (state_next, y)``: each play's clip smoothed over ``eps``.
 
         As for Maxwell-slip, the output error after ``n`` steps is at most ``n·M·eps/2`` for
-        ``M`` plays (each smoothed clip errs by at most ``eps/2`` and is 1-Lipschitz). No
-        direction detection: ``direction_eps`` must stay unset.
+        ``M`` plays (each smoothed clip errs by at most ``eps/2`` and is 1-Lipschitz).
+
+        Parameters
+        ----------
+        eps : float
+            Smoothing width of each clip, > 0; it acts on the element forces (output units).
+        direction_eps : None
+            Must stay unset: no direction detection (``ValueError`` otherwise).
+
+        Returns
+        -------
+        casadi.Function
+            ``(state, u) -> (state_next, y)``.
         """
         check_smoothing(eps, direction_eps, has_direction=False)
         n = len(self.weights)
@@ -111,6 +159,20 @@ class PrandtlIshlinskii(SteppedModel):
 
         Exact: the output is piecewise linear and monotone along a monotone input path. On CasADi
         expressions (a generated controller) :meth:`symbolic_inverse_step`.
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            State to move from.
+        y_target : float or CasADi expression
+            Output to reach; a NumPy one must be finite (else ``ValueError``).
+
+        Returns
+        -------
+        state : ndarray or CasADi expression
+            State after the move.
+        u : float or CasADi expression
+            The input.
         """
         if symbolic(state) or symbolic(y_target):
             return self.symbolic_inverse_step(state, y_target)
@@ -131,6 +193,20 @@ class PrandtlIshlinskii(SteppedModel):
         the one at each play's break point ``b_i``. So the ``δ`` that reaches the target is the
         smallest of the lines' own crossings (a line with no slope never crosses). The same
         input as the NumPy steps to rounding; ``O(n²)`` operations for ``n`` plays.
+
+        Parameters
+        ----------
+        state : CasADi expression
+            State to move from.
+        y_target : float or CasADi expression
+            Output to reach.
+
+        Returns
+        -------
+        state : CasADi expression
+            State after the move.
+        u : CasADi expression
+            The input.
         """
         if not self.weights:
             u = y_target / self.linear_gain

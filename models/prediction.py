@@ -121,7 +121,22 @@ class PredictionModel:
         return self.measure.size1_out(0)
 
     def rollout(self, x0, u_seq, d) -> np.ndarray:
-        """States ``x_0..x_N`` (shape ``(N+1, nx)``) under the inputs ``u_seq`` (shape ``(N, nu)``)."""
+        """States ``x_0..x_N`` (shape ``(N+1, nx)``) under the inputs ``u_seq`` (shape ``(N, nu)``).
+
+        Parameters
+        ----------
+        x0 : array_like
+            Initial state.
+        u_seq : array_like
+            Inputs, reshaped to ``(N, nu)``.
+        d : array_like or float
+            Disturbance, held over the rollout.
+
+        Returns
+        -------
+        ndarray, shape (N+1, nx)
+            The states, ``x0`` first.
+        """
         u_seq = np.asarray(u_seq, float).reshape(-1, self.nu)
         xs = np.empty((len(u_seq) + 1, self.nx))
         xs[0] = np.asarray(x0, float).ravel()
@@ -244,8 +259,14 @@ def _rhs(dynamics: Dynamics, x, u, h, d) -> ca.SX:
 def check_sampling(sample_period: float, delay_samples: int, substeps: int) -> None:
     """``ValueError`` unless the sample period, the dead time and the RK4 substeps are valid.
 
-    The sample period must be finite and > 0, the dead time an integer >= 0 and the RK4 substeps
-    an integer >= 1.
+    Parameters
+    ----------
+    sample_period : float
+        Sample period (s), finite and > 0.
+    delay_samples : int
+        Dead time (samples), an integer >= 0.
+    substeps : int
+        RK4 steps per sample, an integer >= 1.
     """
     if not (np.isfinite(sample_period) and sample_period > 0):
         raise ValueError(f"sample_period must be finite and > 0, got {sample_period}")
@@ -337,18 +358,18 @@ def build_prediction_model(hysteresis: HysteresisModel, sample_period: float, *,
         Sample period (s).
     dynamics : Dynamics, optional
         The actuator around the hysteresis; None: the output is the hysteresis output.
-    eps, direction_eps : float
+    eps, direction_eps : float, optional
         Smoothing widths (see the hysteresis model's ``smooth_step``).
-    disturbance : str
+    disturbance : str, optional
         Where the offset-free disturbance enters, one of :data:`DISTURBANCES`.
-    delay_samples : int
+    delay_samples : int, optional
         Samples of dead time between the input and the actuator.
-    substeps : int
+    substeps : int, optional
         RK4 steps per sample for continuous dynamics.
-    creep_order : float
+    creep_order : float, optional
         α > 0 puts a Grünwald–Letnikov creep integral between an input-driven hysteresis
         and the dynamics; the result is then a :class:`CreepPredictionModel`.
-    name : str
+    name : str, optional
         Prefix of the CasADi Functions.
 
     Returns
@@ -423,6 +444,25 @@ class CreepPredictionModel:
     fixes (:meth:`hystmpc.models.fractional.GrunwaldLetnikov.history_terms`), so the NLP
     stays small however long the memory (docs/dea.md, "Model"). Built by
     :func:`build_prediction_model` with ``creep_order > 0``.
+
+    Parameters
+    ----------
+    hysteresis : HysteresisModel
+        Input-driven hysteresis; its ``smooth_step(eps, direction_eps)`` predicts.
+    dynamics : Dynamics
+        The dynamics after the creep, driven by the creep output alone (``ValueError`` otherwise).
+    sample_period : float
+        Sample period (s).
+    creep_order : float
+        α of the creep integral.
+    eps : float
+        Smoothing width of the hysteresis.
+    direction_eps : float or None
+        Width of the input-direction detection (None: the model's default).
+    disturbance : str
+        Where ``d`` enters, one of :data:`DISTURBANCES` but ``auto``.
+    substeps : int
+        RK4 steps per sample for continuous dynamics.
     """
 
     def __init__(self, hysteresis: HysteresisModel, dynamics: Dynamics, sample_period: float,
@@ -444,7 +484,18 @@ class CreepPredictionModel:
         return self._parts.nd
 
     def parameter_layout(self, horizon: int) -> dict[str, slice]:
-        """Where each part sits in the ``p`` vector of :meth:`horizon_function`."""
+        """Where each part sits in the ``p`` vector of :meth:`horizon_function`.
+
+        Parameters
+        ----------
+        horizon : int
+            Prediction horizon N (samples).
+
+        Returns
+        -------
+        dict of str to slice
+            Slices of ``hysteresis``, ``x``, ``d`` and ``history`` in ``p``.
+        """
         nh, nx = len(self.hysteresis.state_names), self.dynamics.nx
         return {"hysteresis": slice(0, nh), "x": slice(nh, nh + nx), "d": slice(nh + nx, nh + nx + self.nd),
                 "history": slice(nh + nx + self.nd, nh + nx + self.nd + horizon)}
@@ -453,8 +504,19 @@ class CreepPredictionModel:
         """``(p, U) -> Y``: outputs y_{k+1..k+N} for inputs u_k..u_{k+N−1}.
 
         ``p = [hysteresis state, x_dyn, d, hist_1..hist_N]`` (:meth:`parameter_layout`).
-        ``inline``: one SX expression graph (fast in-process); false: an MX graph that calls
-        one hysteresis step and one dynamics step per sample (small generated C).
+
+        Parameters
+        ----------
+        horizon : int
+            Prediction horizon N (samples).
+        inline : bool, optional
+            One SX expression graph (fast in-process); False: an MX graph that calls one
+            hysteresis step and one dynamics step per sample (small generated C).
+
+        Returns
+        -------
+        casadi.Function
+            ``(p, U) -> Y``.
         """
         if not inline:
             return self._horizon(horizon, linear=False)
@@ -480,8 +542,18 @@ class CreepPredictionModel:
         Built from one hysteresis step and one dynamics step with their Jacobians, called once
         per predicted sample, with the sensitivities to the inputs carried forward (through the
         hysteresis state, the Grünwald–Letnikov sum and the dynamic state). Differentiating the
-        unrolled horizon instead gives the same numbers with one C expression per entry: for
-        dea at N = 15, 2.4 MB of generated C.
+        unrolled horizon instead gives the same numbers with one C expression per entry, far
+        more generated C (docs/realtime.md).
+
+        Parameters
+        ----------
+        horizon : int
+            Prediction horizon N (samples).
+
+        Returns
+        -------
+        casadi.Function
+            ``(p, U) -> (Y, dY_dU)``.
         """
         return self._horizon(horizon, linear=True)
 
@@ -521,7 +593,7 @@ class CreepPredictionModel:
             if linear:
                 A_s, B_s, C_w, D_w = hysteresis_jac
                 A_x, B_x, C_y = dynamics_jac
-                unit = ca.DM.zeros(1, horizon)  # dense: a sparse one runs 5 % faster but is 1.6x the code
+                unit = ca.DM.zeros(1, horizon)  # dense: a sparse one runs hardly faster and makes far more code
                 unit[i] = 1
                 dws.append(C_w @ S_state + D_w @ unit)
                 S_state = A_s @ S_state + B_s @ unit

@@ -43,7 +43,19 @@ from hystmpc.models.smooth import smooth_clip, smooth_max, smooth_min
 def cell_ramps(z, knots, reversible: bool) -> np.ndarray:
     """``clip(z − s_j, 0, s_{j+1} − s_j)`` for every cell of ``knots`` (a new last axis).
 
-    With ``reversible`` the end cells continue beyond the grid (the reversible part's shape).
+    Parameters
+    ----------
+    z : array_like
+        Play outputs, any shape.
+    knots : array_like
+        Cell bounds ``s_0 < … < s_m``.
+    reversible : bool
+        Whether the end cells continue beyond the grid (the reversible part's shape).
+
+    Returns
+    -------
+    ndarray
+        Shape ``z.shape + (m,)``: the ramp of each cell.
     """
     s = np.asarray(knots, float)
     width = np.diff(s)
@@ -97,7 +109,18 @@ class Preisach(SteppedModel):
         return ("u_last", *(f"play_{i + 1}" for i in range(self.n_plays)))
 
     def initial_state(self, u0: float = 0.0) -> np.ndarray:
-        """Relaxed at ``u0``: every play centred on the input."""
+        """Relaxed at ``u0``: every play centred on the input.
+
+        Parameters
+        ----------
+        u0 : float, optional
+            Input.
+
+        Returns
+        -------
+        ndarray
+            ``[u0, u0, …, u0]`` (``n + 1`` entries).
+        """
         return np.full(self.n_plays + 1, float(u0))
 
     # ----- the shape functions ψ_i --------------------------------------------------------------------
@@ -125,14 +148,36 @@ class Preisach(SteppedModel):
         return total
 
     def output(self, state):
-        """Output of a state (NumPy or CasADi)."""
+        """Output of a state (NumPy or CasADi).
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            ``[u_last, z_1, …, z_n]``.
+
+        Returns
+        -------
+        float or CasADi expression
+            The output.
+        """
         if symbolic(state):
             return sum((self._shape(i, state[i]) for i in range(self.n_plays + 1)), 0)
         state = np.asarray(state, float)
         return float(sum(self._shape(i, state[i]) for i in range(self.n_plays + 1)))
 
     def outputs(self, states) -> np.ndarray:
-        """Outputs of many states (rows), vectorised."""
+        """Outputs of many states (rows), vectorised.
+
+        Parameters
+        ----------
+        states : array_like, shape (k, n + 1)
+            One state per row (a single state counts as one row).
+
+        Returns
+        -------
+        ndarray, shape (k,)
+            The output of each state.
+        """
         states = np.atleast_2d(np.asarray(states, float))
         mu = np.asarray(self.density)
         total = np.einsum("kj,j->k", cell_ramps(states[:, 0], self.knots, True), mu[0])
@@ -142,7 +187,22 @@ class Preisach(SteppedModel):
 
     # ----- steps --------------------------------------------------------------------------------------
     def step(self, state, u: float) -> tuple[np.ndarray, float]:
-        """Exact step to input ``u``: ``(state, y)`` (CasADi expressions when ``state`` or ``u`` is one)."""
+        """Exact step to input ``u``: ``(state, y)`` (CasADi expressions when ``state`` or ``u`` is one).
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            State before the step.
+        u : float or CasADi expression
+            New input; a NumPy one must be finite (else ``ValueError``).
+
+        Returns
+        -------
+        state : ndarray or CasADi expression
+            State after the step.
+        y : float or CasADi expression
+            Output after the step.
+        """
         r = np.asarray(self.thresholds)
         if symbolic(state) or symbolic(u):
             z = clip(state[1:], u - ca.DM(r), u + ca.DM(r)) if self.n_plays else ca.SX(0, 1)
@@ -161,8 +221,19 @@ class Preisach(SteppedModel):
 
         A smoothed play errs by at most ``eps/2`` (1-Lipschitz), so after ``n`` steps a play is
         within ``n·eps/2``; each kink adds at most ``eps/2`` times its slope. The output error is
-        at most ``(n·eps/2 + eps/2) · Σ_ij μ_ij``. No direction detection: ``direction_eps``
-        must stay unset.
+        at most ``(n·eps/2 + eps/2) · Σ_ij μ_ij``.
+
+        Parameters
+        ----------
+        eps : float
+            Smoothing width (input units), > 0.
+        direction_eps : None
+            Must stay unset: no direction detection (``ValueError`` otherwise).
+
+        Returns
+        -------
+        casadi.Function
+            ``(state, u) -> (state_next, y)``.
         """
         check_smoothing(eps, direction_eps, has_direction=False)
         r = self.thresholds
@@ -179,12 +250,25 @@ class Preisach(SteppedModel):
 
         Once a move has gone ``reach`` and past ``edges``, every play follows the input beyond the
         knots, and only the reversible part's end slope is left.
+
+        Returns
+        -------
+        edges : tuple of float
+            ``(s_0 − r_max, s_m + r_max)`` (input units).
+        reach : float
+            ``2·r_max`` (input units).
         """
         r_max = max(self.thresholds, default=0.0)
         return (self.knots[0] - r_max, self.knots[-1] + r_max), 2.0 * r_max
 
     def tail_slopes(self) -> tuple[float, float]:
-        """The output's slope once the input is beyond every knot and play: downwards, upwards."""
+        """The output's slope once the input is beyond every knot and play: downwards, upwards.
+
+        Returns
+        -------
+        tuple of float
+            The reversible part's first and last cell slopes, ``(μ_00, μ_0,m−1)``.
+        """
         return self.density[0][0], self.density[0][-1]
 
     def inverse_step(self, state, y_target: float) -> tuple[np.ndarray, float]:
@@ -193,6 +277,20 @@ class Preisach(SteppedModel):
         Found along a monotone move (exact: the output is piecewise linear and monotone along the
         move). A target beyond the model's reach gives the input where the output stops changing.
         On CasADi expressions: bisection (:func:`hystmpc.models.base.bisection_inverse`).
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            State to move from.
+        y_target : float or CasADi expression
+            Output to reach; a NumPy one must be finite (else ``ValueError``).
+
+        Returns
+        -------
+        state : ndarray or CasADi expression
+            State after the move.
+        u : float or CasADi expression
+            The input.
         """
         if symbolic(state) or symbolic(y_target):
             return bisection_inverse(self, state, y_target, *self.linear_beyond(), self.tail_slopes())

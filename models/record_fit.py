@@ -53,7 +53,18 @@ class Record:
             raise ValueError(f"warm-up of {self.warm_up} samples leaves fewer than 10 of the {len(self.u)} to fit")
 
     def rows(self, limit: int | None = COST_ROWS) -> np.ndarray:
-        """The samples of the cost: after the warm-up, at most ``limit`` evenly spaced."""
+        """The samples of the cost: after the warm-up, at most ``limit`` evenly spaced.
+
+        Parameters
+        ----------
+        limit : int or None, optional
+            Most samples kept (default: :data:`COST_ROWS`); None keeps every one.
+
+        Returns
+        -------
+        ndarray
+            Indices of the samples, increasing.
+        """
         rows = np.arange(self.warm_up, len(self.u))
         if limit is not None and len(rows) > limit:
             rows = rows[np.round(np.linspace(0, len(rows) - 1, limit)).astype(int)]
@@ -63,7 +74,19 @@ class Record:
 # ----- the linear block -------------------------------------------------------------------------------
 
 def block_theta(block: LinearDynamics) -> np.ndarray:
-    """The block's parameters as the refinement moves them (logarithms)."""
+    """The block's parameters as the refinement moves them (logarithms).
+
+    Parameters
+    ----------
+    block : LinearDynamics
+        The linear block.
+
+    Returns
+    -------
+    ndarray
+        ``[log time_constant]`` (first-order), ``[log natural_frequency_hz, log damping]``
+        (second-order) or empty.
+    """
     if block.kind == "first-order":
         return np.log([block.time_constant])
     if block.kind == "second-order":
@@ -76,6 +99,18 @@ def block_bounds(kind: str, sample_period: float) -> tuple[list[float], list[flo
 
     A lag between a tenth of a sample and 1e4 s; a resonance below Nyquist with a damping from
     0.007 to 7.
+
+    Parameters
+    ----------
+    kind : str
+        Block kind (``"none"``, ``"first-order"``, ``"second-order"``).
+    sample_period : float
+        Sample period (s).
+
+    Returns
+    -------
+    tuple of list
+        ``(lower, upper)``, one entry per parameter of :func:`block_theta`.
     """
     if kind == "first-order":
         return [np.log(sample_period / 10)], [np.log(1e4)]
@@ -85,7 +120,22 @@ def block_bounds(kind: str, sample_period: float) -> tuple[list[float], list[flo
 
 
 def block_of(kind: str, theta, delay: int) -> LinearDynamics:
-    """The block of :func:`block_theta` values."""
+    """The block of :func:`block_theta` values.
+
+    Parameters
+    ----------
+    kind : str
+        Block kind (``"none"``, ``"first-order"``, ``"second-order"``).
+    theta : array_like
+        Its parameters as :func:`block_theta` gives them.
+    delay : int
+        Dead time (samples).
+
+    Returns
+    -------
+    LinearDynamics
+        The block.
+    """
     if kind == "first-order":
         return LinearDynamics("first-order", time_constant=float(np.exp(theta[0])), delay_samples=delay)
     if kind == "second-order":
@@ -99,6 +149,20 @@ def respond(columns: np.ndarray, block: LinearDynamics, record: Record) -> np.nd
 
     The outputs go through the block (from its steady state at each column's first value), the
     dead time, then the record's row alignment.
+
+    Parameters
+    ----------
+    columns : ndarray
+        Hysteresis outputs, one per sample: a vector or one signal per column.
+    block : LinearDynamics
+        The linear block with its dead time.
+    record : Record
+        The record (its sample period and alignment).
+
+    Returns
+    -------
+    ndarray
+        The sensor readings, of the shape of ``columns``.
     """
     columns = np.asarray(columns, float)
     flat = columns.ndim == 1
@@ -117,7 +181,23 @@ def project(F: np.ndarray, y: np.ndarray, nonneg: np.ndarray, penalty: np.ndarra
             intercept: bool = True) -> tuple[np.ndarray, float]:
     """Weights ``w`` and offset ``c`` minimising ``|y − F w − c|² + |penalty w|²``.
 
-    ``w`` is non-negative where ``nonneg``; ``c = 0`` without ``intercept``.
+    Parameters
+    ----------
+    F : ndarray
+        Columns, ``(n_rows, p)``.
+    y : ndarray
+        Target, one value per row.
+    nonneg : ndarray
+        Per column (bool): its weight is constrained to >= 0.
+    penalty : ndarray, optional
+        Penalty rows, ``(m, p)``, or None.
+    intercept : bool, optional
+        Fit the offset ``c``; ``c = 0`` without it.
+
+    Returns
+    -------
+    tuple
+        ``(w, c)``: the weights (ndarray) and the offset (float).
     """
     return project_normal(F.T @ F, F.T @ y, F.sum(axis=0), float(np.sum(y)), len(y), nonneg, penalty, intercept)
 
@@ -126,8 +206,31 @@ def project_normal(FtF, Fty, sum_f, sum_y: float, n: int, nonneg: np.ndarray, pe
                    intercept: bool = True) -> tuple[np.ndarray, float]:
     """:func:`project` from the normal equations' pieces.
 
-    The pieces are ``FᵀF``, ``Fᵀy``, ``Σ_rows F``, ``Σ y`` and the number of rows ``n`` (which
-    the refinement keeps per group of columns).
+    The refinement keeps these pieces per group of columns.
+
+    Parameters
+    ----------
+    FtF : ndarray
+        ``FᵀF``.
+    Fty : ndarray
+        ``Fᵀy``.
+    sum_f : ndarray
+        ``Σ_rows F``, one sum per column.
+    sum_y : float
+        ``Σ y``.
+    n : int
+        Number of rows.
+    nonneg : ndarray
+        Per column (bool): its weight is constrained to >= 0.
+    penalty : ndarray, optional
+        Penalty rows, ``(m, p)``, or None.
+    intercept : bool, optional
+        Fit the offset ``c``; ``c = 0`` without it.
+
+    Returns
+    -------
+    tuple
+        ``(w, c)``: the weights (ndarray) and the offset (float), as :func:`project` gives them.
     """
     from scipy.linalg import cho_factor, cho_solve, solve_triangular
     from scipy.optimize import nnls
@@ -200,7 +303,18 @@ class Problem:
     _y_rows: tuple | None = field(default=None, repr=False)
 
     def columns(self, theta: np.ndarray) -> np.ndarray:
-        """Every hysteresis-output column at ``theta`` (unfiltered)."""
+        """Every hysteresis-output column at ``theta`` (unfiltered).
+
+        Parameters
+        ----------
+        theta : ndarray
+            The nonlinear parameters.
+
+        Returns
+        -------
+        ndarray
+            ``(n_samples, p)``: the groups' columns side by side.
+        """
         return np.hstack([fn(np.asarray(theta)[idx]) for idx, fn in self.groups])
 
     def _group(self, g: int, theta, block: LinearDynamics, record: Record, rows: np.ndarray):
@@ -215,7 +329,22 @@ class Problem:
         return key, self._cache[key]
 
     def responses(self, theta: np.ndarray, block: LinearDynamics, record: Record) -> np.ndarray:
-        """The filtered, aligned columns on every sample (not cached)."""
+        """The filtered, aligned columns on every sample (not cached).
+
+        Parameters
+        ----------
+        theta : ndarray
+            The nonlinear parameters.
+        block : LinearDynamics
+            The linear block with its dead time.
+        record : Record
+            The record.
+
+        Returns
+        -------
+        ndarray
+            ``(n_samples, p)``: :meth:`columns` through :func:`respond`.
+        """
         return respond(self.columns(theta), block, record)
 
     def _normal_equations(self, parts, y: np.ndarray):
@@ -247,7 +376,25 @@ class Problem:
         return F, FtF, Fty, sums
 
     def solve(self, theta, block: LinearDynamics, record: Record, rows: np.ndarray):
-        """``(weights, offset, prediction on rows)`` at ``theta`` and ``block``."""
+        """``(weights, offset, prediction on rows)`` at ``theta`` and ``block``.
+
+        Parameters
+        ----------
+        theta : ndarray
+            The nonlinear parameters.
+        block : LinearDynamics
+            The linear block with its dead time.
+        record : Record
+            The record.
+        rows : ndarray
+            Indices of the samples the weights are projected on.
+
+        Returns
+        -------
+        tuple
+            ``(w, c, prediction)``: the weights (``fixed_weights`` if set), the offset and the
+            prediction on ``rows``.
+        """
         parts = [self._group(g, theta, block, record, rows) for g in range(len(self.groups))]
         y = record.y[rows]
         if self.fixed_weights is not None:
@@ -270,6 +417,18 @@ def with_creep(problem: Problem, record: Record) -> Problem:
 
     Every group goes through the creep, α is a new last entry of ``theta`` (in [0, 0.5)), and the
     output offset is a column of ones through the creep (where a model with creep carries it).
+
+    Parameters
+    ----------
+    problem : Problem
+        A problem with an intercept and free weights (``ValueError`` otherwise).
+    record : Record
+        The record (its length and sample period).
+
+    Returns
+    -------
+    Problem
+        The new problem; its parameters add ``creep_order`` and ``output_offset``.
     """
     if problem.fixed_weights is not None or not problem.intercept:
         raise ValueError("this family takes no creep of this kind (its scale or offset is its own parameter)")
@@ -303,7 +462,24 @@ class Fit:
 
 
 def evaluate(problem: Problem, theta, block: LinearDynamics, record: Record) -> Fit:
-    """The fit at ``theta`` and ``block`` with the weights projected on every cost sample."""
+    """The fit at ``theta`` and ``block`` with the weights projected on every cost sample.
+
+    Parameters
+    ----------
+    problem : Problem
+        The family's problem.
+    theta : array_like
+        The nonlinear parameters.
+    block : LinearDynamics
+        The linear block with its dead time.
+    record : Record
+        The record; every sample after the warm-up counts.
+
+    Returns
+    -------
+    Fit
+        The fit; its RMSE is infinite where the prediction is not finite.
+    """
     rows = record.rows(None)
     w, c, pred = problem.solve(theta, block, record, rows)
     rmse = float(np.sqrt(np.mean((pred - record.y[rows]) ** 2)))
@@ -314,9 +490,29 @@ def refine(problem: Problem, record: Record, block: LinearDynamics, move_block: 
            iterations: int | None = None, hold: tuple[int, ...] = ()) -> Fit:
     """Move ``theta`` (and the block's parameters if ``move_block``) to the least simulation error.
 
-    The weights and offset are projected at each step, for at most ``iterations`` (default: the
-    problem's) Gauss–Newton steps, each one finite-difference Jacobian; the dead time stays.
-    Entries whose bounds coincide, and those in ``hold``, stay where they are.
+    The weights and offset are projected at each step, each Gauss–Newton step one
+    finite-difference Jacobian; the dead time stays. Entries whose bounds coincide stay where
+    they are.
+
+    Parameters
+    ----------
+    problem : Problem
+        The family's problem, started at its ``theta``.
+    record : Record
+        The record.
+    block : LinearDynamics
+        The linear block: its parameters are the start, its dead time stays.
+    move_block : bool, optional
+        Move the block's parameters too.
+    iterations : int, optional
+        Most Gauss–Newton steps (default: the problem's ``iterations``).
+    hold : tuple of int, optional
+        Entries of ``theta`` that stay where they are.
+
+    Returns
+    -------
+    Fit
+        The fit on every sample after the warm-up, with the names of the entries that ended at a bound.
     """
     from scipy.optimize import least_squares
 
@@ -380,11 +576,25 @@ def _grid(kind: str, record: Record) -> list[np.ndarray]:
 def fit_block(h: np.ndarray, record: Record, kind: str, delays: Sequence[int]) -> tuple[LinearDynamics, float]:
     """The block ``kind`` and dead time that best map one hysteresis output ``h`` onto the record.
 
-    The dead time is taken from ``delays``, and the gain and offset are projected; returns
-    ``(block, rmse)``.
+    The gain and offset are projected. A grid search (each dead time with every grid block; for
+    a second-order block, the dead times within 2 samples of the best lag's), then a
+    least-squares polish of the best.
 
-    A grid search (each dead time with every grid block; for a second-order block, the dead
-    times within 2 samples of the best lag's), then a least-squares polish of the best.
+    Parameters
+    ----------
+    h : ndarray
+        One hysteresis output, one value per sample.
+    record : Record
+        The record.
+    kind : str
+        Block kind (``"none"``, ``"first-order"``, ``"second-order"``).
+    delays : sequence of int
+        Dead times to try (samples).
+
+    Returns
+    -------
+    tuple
+        ``(block, rmse)``: the best block with its dead time, and its RMSE after the warm-up.
     """
     rows = record.rows()
     y = record.y[rows]

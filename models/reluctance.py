@@ -34,7 +34,20 @@ class ReluctanceModel:
     """Coefficients of i = Σ c_ab (√F)^a (g/1 mm)^b, a + b <= 4, over all gaps (poly-inverse)."""
 
     def neighbours(self, gap: float) -> tuple[int, int, float]:
-        """Indices of the identified gaps around ``gap`` and the weight of the upper one."""
+        """Indices of the identified gaps around ``gap`` and the weight of the upper one.
+
+        Parameters
+        ----------
+        gap : float
+            Air gap (m).
+
+        Returns
+        -------
+        lower, upper : int
+            Indices into ``gaps``; outside the identified range both are the nearest end.
+        weight : float
+            Weight of ``upper`` in [0, 1] (0 outside the identified range).
+        """
         gaps = np.asarray(self.gaps)
         if gap <= gaps[0]:
             return 0, 0, 0.0
@@ -44,25 +57,75 @@ class ReluctanceModel:
         return j - 1, j, (gap - gaps[j - 1]) / (gaps[j] - gaps[j - 1])
 
     def x_of_force(self, force, gap: float):
-        """Lut(F, g): linear in F within a gap's table, linear between gaps (eq. (15))."""
+        """Lut(F, g): linear in F within a gap's table, linear between gaps (eq. (15)).
+
+        Parameters
+        ----------
+        force : float, ndarray or CasADi expression
+            Force (N); the tables' end values hold beyond them.
+        gap : float
+            Air gap (m).
+
+        Returns
+        -------
+        float, ndarray or CasADi expression
+            H's output X (A).
+        """
         a, b, w = self.neighbours(gap)
         xa = interp(force, *self.tables[a])
         xb = interp(force, *self.tables[b])
         return (1 - w) * xa + w * xb
 
     def force_of_x(self, x, gap: float):
-        """Lut⁻¹(X, g)."""
+        """Lut⁻¹(X, g).
+
+        Parameters
+        ----------
+        x : float or ndarray
+            H's output X (A); the tables' end values hold beyond them.
+        gap : float
+            Air gap (m).
+
+        Returns
+        -------
+        float or ndarray
+            Force (N).
+        """
         a, b, w = self.neighbours(gap)
         fa = np.interp(x, self.tables[a][1], self.tables[a][0])
         fb = np.interp(x, self.tables[b][1], self.tables[b][0])
         return (1 - w) * fa + w * fb
 
     def poly_current(self, force, gap: float):
-        """Single-valued 4th-order polynomial inverse i(F, g)."""
+        """Single-valued 4th-order polynomial inverse i(F, g).
+
+        Parameters
+        ----------
+        force : float or array_like
+            Force (N).
+        gap : float
+            Air gap (m).
+
+        Returns
+        -------
+        ndarray
+            Current (A), at least 1-D (shape (1,) for a scalar force).
+        """
         return poly_features(np.atleast_1d(force), gap) @ self.poly
 
     def operator(self, gap: float) -> ParametricHysteresis:
-        """H with the air-gap law p2(g) = p2/g."""
+        """H with the air-gap law p2(g) = p2/g.
+
+        Parameters
+        ----------
+        gap : float
+            Air gap (m).
+
+        Returns
+        -------
+        ParametricHysteresis
+            H at ``gap``.
+        """
         return ParametricHysteresis(self.p1, self.p2 / gap)
 
     def force_table(self, gap: float) -> tuple[np.ndarray, np.ndarray]:
@@ -73,6 +136,18 @@ class ReluctanceModel:
         put in front: no current, no force. Without that anchor the table's lowest point
         (noise-level force) would be extended flat to zero current, where a model with no
         slope gives a Gauss–Newton step nothing to follow.
+
+        Parameters
+        ----------
+        gap : float
+            Air gap (m).
+
+        Returns
+        -------
+        x : ndarray
+            H's output X at the points (A), increasing.
+        force : ndarray
+            Force at the points (N).
         """
         a, b, w = self.neighbours(gap)
         if w in (0.0, 1.0):
@@ -95,6 +170,19 @@ class ReluctanceModel:
         Meant for CasADi. ``kink_eps = 0``: the polyline itself, a binary-search look-up (CasADi's
         linear interpolant, extended linearly beyond the table), what :func:`prediction_model` uses
         by default; the rounded default suits interior-point NLPs (:func:`offline_optimum`).
+
+        Parameters
+        ----------
+        gap : float
+            Air gap (m).
+        kink_eps : float, optional
+            Width over which each kink is rounded (A), >= 0 (else ``ValueError``).
+
+        Returns
+        -------
+        callable
+            X -> F (N), linear beyond the table; on CasADi expressions, and on NumPy values
+            (a float for a scalar X).
         """
         if not (np.isfinite(kink_eps) and kink_eps >= 0):
             raise ValueError(f"kink_eps must be finite and >= 0 (0: the exact polyline), got {kink_eps}")
@@ -118,7 +206,20 @@ class ReluctanceModel:
 
 
 def poly_features(force, gap):
-    """Features (√F)^a (g/1 mm)^b, a + b <= 4, of the polynomial inverse."""
+    """Features (√F)^a (g/1 mm)^b, a + b <= 4, of the polynomial inverse.
+
+    Parameters
+    ----------
+    force : array_like
+        Force (N); negative values count as 0.
+    gap : float or array_like
+        Air gap (m), broadcast to the shape of ``force``.
+
+    Returns
+    -------
+    ndarray
+        The 15 features on a new last axis, ordered by a, then b.
+    """
     root = np.sqrt(np.maximum(np.asarray(force, float), 0.0))
     g = np.broadcast_to(np.asarray(gap, float) / 1e-3, root.shape)
     return np.stack([root**a * g**b for a in range(5) for b in range(5 - a)], axis=-1)
@@ -130,6 +231,19 @@ def fit_reluctance_model(loops: dict[float, tuple[np.ndarray, np.ndarray]], wind
     p1, p2 and the ascending tables by :func:`hystmpc.models.parametric.identify_major_loop`
     (tables made single-valued and monotone), and one polynomial in force and air gap over
     both branches of every loop, as in the paper's reference [2].
+
+    Parameters
+    ----------
+    loops : dict
+        ``loops[g] = (current, force)`` per air gap g (m): the current 0 -> max -> 0 (A) and the
+        measured force (N).
+    window : int, optional
+        Samples averaged per look-up-table point (1: the paper's plain table).
+
+    Returns
+    -------
+    ReluctanceModel
+        The identified model.
     """
     gaps = tuple(sorted(loops))
     p1, p2, luts = identify_major_loop(loops, window=window)
@@ -153,6 +267,26 @@ def prediction_model(model: ReluctanceModel, gap: float, sample_period: float, e
 
     Force is not measured in operation: no sensors, no disturbance; the state is H's. The
     static inverse is the table, Lut(F, g) (for warm starts: IH[Lut(F, g)], eq. (12a)).
+
+    Parameters
+    ----------
+    model : ReluctanceModel
+        The identified model.
+    gap : float
+        Air gap (m).
+    sample_period : float
+        Sample period (s).
+    eps : float
+        Smoothing width of H (A; see :meth:`ParametricHysteresis.smooth_step`).
+    direction_eps : float, optional
+        Width of H's direction detection (A); None: ``eps``.
+    kink_eps : float, optional
+        Rounding of the table's kinks (A); 0: the exact polyline.
+
+    Returns
+    -------
+    PredictionModel
+        The NMPC's prediction model, named ``reluctance``.
     """
     force = model.smooth_force_of_x(gap, kink_eps)
     dynamics = Dynamics(output=lambda x, h: force(h), sensor_names=(),

@@ -34,22 +34,72 @@ class Scaled(SteppedModel):
         return tuple(self.inner.state_names)
 
     def initial_state(self, u0: float = 0.0) -> np.ndarray:
-        """The inner model's relaxed state."""
+        """The inner model's relaxed state.
+
+        Parameters
+        ----------
+        u0 : float, optional
+            Input the state rests at.
+
+        Returns
+        -------
+        ndarray
+            The inner model's ``initial_state(u0)``.
+        """
         return self.inner.initial_state(u0)
 
     def output(self, state):
-        """``gain ·`` the inner output (NumPy or CasADi)."""
+        """``gain ·`` the inner output (NumPy or CasADi).
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            A state of the inner model.
+
+        Returns
+        -------
+        float or CasADi expression
+            The output.
+        """
         y = self.gain * self.inner.output(state)
         return y if symbolic(y) else float(y)
 
     def step(self, state, u: float) -> tuple[np.ndarray, float]:
-        """Exact step; returns ``(state, gain · y_inner)``."""
+        """Exact step; returns ``(state, gain · y_inner)``.
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            State before the step.
+        u : float or CasADi expression
+            New input.
+
+        Returns
+        -------
+        state : ndarray or CasADi expression
+            The inner model's state after the step.
+        y : float or CasADi expression
+            ``gain`` times the inner output.
+        """
         state, y = self.inner.step(state, u)
         y = self.gain * y
         return state, y if symbolic(y) else float(y)
 
     def smooth_step(self, eps: float, direction_eps: float | None = None) -> ca.Function:
-        """The inner smooth step with its output scaled."""
+        """The inner smooth step with its output scaled.
+
+        Parameters
+        ----------
+        eps : float
+            Smoothing width, passed to the inner model's ``smooth_step``.
+        direction_eps : float, optional
+            Direction-detection width, passed likewise.
+
+        Returns
+        -------
+        casadi.Function
+            ``(state, u) -> (state_next, y)``.
+        """
         inner = self.inner.smooth_step(eps, direction_eps)
 
         def expressions(x, u):
@@ -58,7 +108,22 @@ class Scaled(SteppedModel):
         return smooth_function("scaled_smooth", len(self.state_names), expressions)
 
     def inverse_step(self, state, y_target: float) -> tuple[np.ndarray, float]:
-        """The inner inverse of ``y_target / gain``."""
+        """The inner inverse of ``y_target / gain``.
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            State to move from.
+        y_target : float or CasADi expression
+            Output to reach.
+
+        Returns
+        -------
+        state : ndarray or CasADi expression
+            State after the move.
+        u : float or CasADi expression
+            The input.
+        """
         return self.inner.inverse_step(state, (y_target if symbolic(y_target) else float(y_target)) / self.gain)
 
 
@@ -89,22 +154,72 @@ class Offset(SteppedModel):
         return tuple(self.inner.state_names)
 
     def initial_state(self, u0: float = 0.0) -> np.ndarray:
-        """The inner model's relaxed state at ``u0``."""
+        """The inner model's relaxed state at ``u0``.
+
+        Parameters
+        ----------
+        u0 : float, optional
+            Input the state rests at (this model's input: the inner model's is ``u0 − input_offset``).
+
+        Returns
+        -------
+        ndarray
+            The inner model's ``initial_state(u0 − input_offset)``.
+        """
         return self.inner.initial_state(u0 - self.input_offset)
 
     def output(self, state):
-        """The inner output plus the output offset (NumPy or CasADi)."""
+        """The inner output plus the output offset (NumPy or CasADi).
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            A state of the inner model.
+
+        Returns
+        -------
+        float or CasADi expression
+            The output.
+        """
         y = self.inner.output(state) + self.output_offset
         return y if symbolic(y) else float(y)
 
     def step(self, state, u: float) -> tuple[np.ndarray, float]:
-        """Exact step of the inner model at ``u − input_offset``."""
+        """Exact step of the inner model at ``u − input_offset``.
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            State before the step.
+        u : float or CasADi expression
+            New input.
+
+        Returns
+        -------
+        state : ndarray or CasADi expression
+            The inner model's state after the step.
+        y : float or CasADi expression
+            The inner output plus ``output_offset``.
+        """
         state, y = self.inner.step(state, u - self.input_offset)
         y = y + self.output_offset
         return state, y if symbolic(y) else float(y)
 
     def smooth_step(self, eps: float, direction_eps: float | None = None) -> ca.Function:
-        """The inner smooth step, shifted."""
+        """The inner smooth step, shifted.
+
+        Parameters
+        ----------
+        eps : float
+            Smoothing width, passed to the inner model's ``smooth_step``.
+        direction_eps : float, optional
+            Direction-detection width, passed likewise.
+
+        Returns
+        -------
+        casadi.Function
+            ``(state, u) -> (state_next, y)``.
+        """
         inner = self.inner.smooth_step(eps, direction_eps)
 
         def expressions(x, u):
@@ -113,7 +228,22 @@ class Offset(SteppedModel):
         return smooth_function("offset_smooth", len(self.state_names), expressions)
 
     def inverse_step(self, state, y_target: float) -> tuple[np.ndarray, float]:
-        """The inner inverse of ``y_target − output_offset``, shifted back to this input."""
+        """The inner inverse of ``y_target − output_offset``, shifted back to this input.
+
+        Parameters
+        ----------
+        state : ndarray or CasADi expression
+            State to move from.
+        y_target : float or CasADi expression
+            Output to reach.
+
+        Returns
+        -------
+        state : ndarray or CasADi expression
+            State after the move.
+        u : float or CasADi expression
+            The input (the inner model's plus ``input_offset``).
+        """
         target = y_target - self.output_offset
         state, u = self.inner.inverse_step(state, target if symbolic(target) else float(target))
         u = u + self.input_offset

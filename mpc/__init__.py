@@ -7,6 +7,8 @@
 * :class:`DisturbanceEKF`, :class:`StateObserver`, :class:`MemoryObserver`: estimation.
 * :class:`InverseLinearMpc`, :class:`LinearMpcSettings`: the strong conventional
   alternative, an inverse-model compensation plus an offset-free linear MPC (OSQP).
+* :mod:`hystmpc.mpc.runtime`: where the NMPC runs (Python or its generated C) and where its
+  inverse-model inputs come from, as :class:`NmpcSettings` ask (:func:`~hystmpc.mpc.runtime.assemble_nmpc`).
 * :mod:`hystmpc.mpc.rti`: the real-time iteration step as one code-generatable Function;
   :mod:`hystmpc.mpc.qp`: the interior-point QP it can use instead of DAQP.
 """

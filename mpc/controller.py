@@ -29,8 +29,21 @@ def default_observer(model: PredictionModel | CreepPredictionModel, sensor_noise
                      creep_window: int | None = None):
     """The observer a model gets when none is given.
 
-    Exact memory + an EKF on the dynamics for an input-driven model, an EKF on every state
-    otherwise; EKFs tuned from ``sensor_noise`` (:meth:`DisturbanceEKF.from_sensor_noise`).
+    Parameters
+    ----------
+    model : PredictionModel or CreepPredictionModel
+        The prediction model.
+    sensor_noise : float or array_like, optional
+        Standard deviation of each sensor; the EKFs are tuned from it
+        (:meth:`DisturbanceEKF.from_sensor_noise`). Needed when the model has sensors.
+    creep_window : int, optional
+        Past samples in the creep sums of an input-driven model's observer (None: all).
+
+    Returns
+    -------
+    MemoryObserver or StateObserver
+        Exact memory + an EKF on the dynamics for an input-driven model (no EKF for one without
+        dynamic states or sensors), an EKF on every state otherwise.
     """
     memory = model.memory
     if memory is not None and not (memory.n_dynamic or model.sensor_names):
@@ -159,12 +172,37 @@ class NmpcController:
         self.predicted_output = float("nan")
 
     def sensors(self, measurement) -> np.ndarray:
-        """The sensor vector ``z`` of a plant's measurement."""
+        """The sensor vector ``z`` of a plant's measurement.
+
+        Parameters
+        ----------
+        measurement : Measurement
+            A plant's measurement.
+
+        Returns
+        -------
+        ndarray
+            One value per name of :attr:`sensor_names` (``y``: the measured output).
+        """
         return np.array([measurement.y if name == "y" else measurement.sensors[name]
                          for name in self.sensor_names], float)
 
     def step(self, measurement, ref_window) -> float:
-        """One sample: a measurement and the references ``r_k..r_{k+N}`` in, the input out."""
+        """One sample: a measurement and the references ``r_k..r_{k+N}`` in, the input out.
+
+        Parameters
+        ----------
+        measurement : Measurement
+            This sample's measurement.
+        ref_window : array_like
+            The ``N + 1`` references ``r_k..r_{k+N}``; the problem tracks ``r_{k+1}..r_{k+N}``
+            (all held at ``r_k`` without ``preview``).
+
+        Returns
+        -------
+        float
+            The input to send, finite and inside ``bounds``.
+        """
         # a diverging estimate or cost is tested for and counted below, not warned about
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             return self._step(measurement, ref_window)
@@ -271,7 +309,16 @@ class NmpcController:
         return u_guess, x_guess
 
     def stats(self) -> dict:
-        """Solver statistics of the run so far (for the results document)."""
+        """Solver statistics of the run so far (for the results document).
+
+        Returns
+        -------
+        dict
+            ``name`` (the solver), ``failures``, ``fallbacks``, ``iterations_median``,
+            ``iterations_max``, ``reinitialisations``, ``estimator_resets``, ``statuses``
+            (status -> samples), with ``multistart`` also ``inverse_starts_kept``, with a
+            linear-MPC planner also ``planner_failures``.
+        """
         its = np.asarray(self.iterations) if self.iterations else np.zeros(1)
         return {"name": self.settings.solver, "failures": self.failures, "fallbacks": self.fallbacks,
                 "iterations_median": float(np.median(its)), "iterations_max": int(its.max()),

@@ -76,14 +76,38 @@ class MemoryLayout:
         return sum(self.parts.values())
 
     def initial(self) -> np.ndarray:
-        """The memory before the first step."""
+        """The memory before the first step.
+
+        Returns
+        -------
+        ndarray
+            Zeros, but for the parts of ``initial_values``.
+        """
         mem = np.zeros(self.size)
         for name, values in self.initial_values:
             mem[self.slices[name]] = values
         return mem
 
     def pack(self, mem: ca.MX, **parts) -> ca.MX:
-        """``mem`` with the named parts replaced."""
+        """``mem`` with the named parts replaced.
+
+        Parameters
+        ----------
+        mem : casadi.MX
+            A memory vector.
+        **parts
+            New values by part name (each flattened column-major).
+
+        Returns
+        -------
+        casadi.MX
+            The new memory vector.
+
+        Raises
+        ------
+        ValueError
+            For a name that is not a part.
+        """
         unknown = set(parts) - set(self.parts)
         if unknown:
             raise ValueError(f"unknown memory parts {sorted(unknown)}")
@@ -115,7 +139,24 @@ def _clip(v, lower, upper):
 
 
 def feasible_guess_expr(u, u_prev, u_min: float, u_max: float, du_max: float) -> ca.MX:
-    """:func:`hystmpc.mpc.rti.feasible_guess` on CasADi expressions (the same operations)."""
+    """:func:`hystmpc.mpc.rti.feasible_guess` on CasADi expressions (the same operations).
+
+    Parameters
+    ----------
+    u : casadi.MX
+        The guessed inputs.
+    u_prev : casadi.MX
+        The input sent last.
+    u_min, u_max : float
+        Input bounds.
+    du_max : float
+        Largest change per sample (``inf``: none).
+
+    Returns
+    -------
+    casadi.MX
+        The feasible inputs.
+    """
     u = _clip(u, u_min, u_max)
     if not np.isfinite(du_max):
         return u
@@ -181,7 +222,7 @@ class _MemoryEstimator:
         if obs.creeping:
             if obs.creep_window is None:
                 raise NotGeneratable("a generated controller keeps a fixed creep memory: the whole history grows "
-                                     "without bound; give the creep sums a window (dea: --set memory.window=200)")
+                                     "without bound; give the creep sums a window (dea: memory.window=200)")
             self.creep = window_functions(-self.memory.creep_order, model.sample_period, obs.creep_window,
                                           controller.horizon)
             parts.append(("creep", obs.creep_window + 1))
@@ -290,6 +331,21 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
         model that accepts CasADi expressions (as the observer's ``initial_state`` must).
     name : str
         Prefix of the Functions' names (``<name>_feedback``, ``<name>_prepare``).
+
+    Returns
+    -------
+    feedback : casadi.Function
+        ``feedback(mem, z, ref_preview) -> (mem_next, u, status, predicted)``; ``status`` 0: the
+        RTI steps succeeded, 1: they failed, 2: the estimate was not finite and restarted.
+    prepare : casadi.Function
+        ``prepare(mem) -> mem_next``.
+    layout : MemoryLayout
+        Their memory layout.
+
+    Raises
+    ------
+    NotGeneratable
+        When the controller cannot be generated.
     """
     estimator = _estimator(controller)
     _check(controller)
@@ -325,7 +381,7 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     has_plan = ca.logic_and(part("has_plan") > 0.5, ca.logic_not(lost))  # a restarted estimate drops the plan
     plan = part("plan")
     shifted = ca.vertcat(plan[1:], plan[-1])
-    # the inverse costs dea's controller a quarter of its step: computed only on the samples that use it
+    # the inverse is a large share of a step: computed only on the samples that use it
     restart = ca.logic_or(ca.logic_not(has_plan), jump)  # the inverse warm start's samples
     needs_inverse = ca.MX(1) if s.r_input > 0 or s.multistart else restart if s.warm_start == "inverse" else ca.MX(0)
     u_inv = None
@@ -383,10 +439,23 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
 def controller_code(controller, name: str) -> ControllerCode:
     """What :func:`hystmpc.mpc.codegen.write_controller` writes for ``controller``.
 
-    Its Functions (:func:`controller_functions`, prefixed ``name``) and the facts its C header
-    states.
+    Parameters
+    ----------
+    controller : NmpcController
+        As in :func:`controller_functions`.
+    name : str
+        Prefix of the Functions' names.
 
-    Raises :class:`NotGeneratable` when the controller cannot be generated.
+    Returns
+    -------
+    ControllerCode
+        Its Functions (:func:`controller_functions`, prefixed ``name``) and the facts its C
+        header states.
+
+    Raises
+    ------
+    NotGeneratable
+        When the controller cannot be generated.
     """
     feedback, prepare, layout = controller_functions(controller, name)
     sl, rti = layout.slices, controller.solvers.rti
@@ -436,9 +505,33 @@ def rti_steps_expr(rti: ca.Function, w, p, iterations: int, extra_step_tolerance
                    extra_step: ca.Function | None = None):
     """:func:`hystmpc.mpc.rti.rti_steps` as expressions: ``(w, worst, broken)``.
 
-    The last finite iterate, the worst ``qp_error`` (a NaN stays) and whether a step was not
-    finite. A non-finite step keeps the iterate before it, so that the next QP gets finite data.
-    ``extra_step``: :func:`_extra_rti_step` of ``rti``, made once per generated controller.
+    A non-finite step keeps the iterate before it, so that the next QP gets finite data.
+
+    Parameters
+    ----------
+    rti : casadi.Function
+        ``rti_step(w, p) -> (w_next, qp_error)``.
+    w : casadi.MX
+        The first iterate.
+    p : casadi.MX
+        The step's parameters.
+    iterations : int
+        Steps to take.
+    extra_step_tolerance : float, optional
+        One more step when the last moved an entry of the iterate by more than this, and no
+        step was non-finite (``inf``: never).
+    extra_step : casadi.Function, optional
+        :func:`_extra_rti_step` of ``rti``, made once per generated controller (None: made
+        here when needed).
+
+    Returns
+    -------
+    w : casadi.MX
+        The last finite iterate.
+    worst : casadi.MX
+        The worst ``qp_error`` (a NaN stays).
+    broken : casadi.MX
+        Whether a step was not finite.
     """
     worst, broken, moved = ca.MX(0), ca.MX(0), ca.MX(0)
 
@@ -549,7 +642,20 @@ class FunctionController:
         self.predicted_output = float("nan")
 
     def step(self, measurement, ref_window) -> float:
-        """One feedback call, then the prepare call for the next sample."""
+        """One feedback call, then the prepare call for the next sample.
+
+        Parameters
+        ----------
+        measurement : Measurement
+            This sample's measurement.
+        ref_window : array_like
+            References ``r_k..r_{k+N}``.
+
+        Returns
+        -------
+        float
+            The input ``u``.
+        """
         mem, u, status, predicted = self.feedback(self.mem, self.controller.sensors(measurement),
                                                   np.asarray(ref_window, float))
         self.mem = np.asarray(self.prepare(mem)).ravel()
@@ -558,7 +664,14 @@ class FunctionController:
         return float(u)
 
     def stats(self) -> dict:
-        """Failures and restarts counted by the memory, and the status codes seen."""
+        """Failures and restarts counted by the memory, and the status codes seen.
+
+        Returns
+        -------
+        dict
+            ``name`` (``generated``), ``failures``, ``estimator_resets`` and ``statuses``
+            (status code -> samples).
+        """
         sl = self.layout.slices
         return {"name": "generated", "failures": int(self.mem[sl["failures"]][0]),
                 "estimator_resets": int(self.mem[sl["estimator_resets"]][0]), "statuses": dict(self.statuses)}

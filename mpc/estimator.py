@@ -68,19 +68,41 @@ class DisturbanceEKF:
         return time_update, measurement_update
 
     def reset(self, x0, d0, P0) -> None:
-        """Set the estimate and its covariance (diagonal ``P0``)."""
+        """Set the estimate and its covariance (diagonal ``P0``).
+
+        Parameters
+        ----------
+        x0 : array_like, shape (nx,)
+            State estimate.
+        d0 : array_like, shape (nd,)
+            Disturbance estimate.
+        P0 : array_like, shape (nx + nd,)
+            Diagonal of the covariance of ``[x; d]``.
+        """
         self.x = np.asarray(x0, float).copy()
         self.d = np.asarray(d0, float).copy()
         self.P = np.diag(np.asarray(P0, float))
 
     def predict(self, u) -> None:
-        """Time update with the applied input ``u``."""
+        """Time update with the applied input ``u``.
+
+        Parameters
+        ----------
+        u : array_like, shape (nu,)
+            The input applied over the sample.
+        """
         z_next, P = self.time_update(self.x, u, self.d, self.P, self.Q)
         z_next = np.asarray(z_next).ravel()
         self.x, self.d, self.P = z_next[: self.model.nx], z_next[self.model.nx:], np.asarray(P)
 
     def update(self, z_meas) -> None:
-        """Measurement update with the sensor vector ``z_meas``."""
+        """Measurement update with the sensor vector ``z_meas``.
+
+        Parameters
+        ----------
+        z_meas : array_like, shape (nz,)
+            The sensor vector.
+        """
         z, P = self.measurement_update(self.x, self.d, self.P, np.asarray(z_meas, float), self.R)
         z = np.asarray(z).ravel()
         self.x, self.d, self.P = z[: self.model.nx], z[self.model.nx:], np.asarray(P)
@@ -102,6 +124,13 @@ class DisturbanceEKF:
         sensor_noise : float or array_like
             Standard deviation of each sensor (one value: every sensor), > 0; unused (None)
             for a model without sensors.
+
+        Returns
+        -------
+        ekf : DisturbanceEKF
+            The tuned EKF.
+        initial_covariance : ndarray, shape (nx + nd,)
+            Diagonal of its initial covariance.
         """
         noise = np.broadcast_to(np.asarray(1.0 if sensor_noise is None else sensor_noise, float), (model.nz,)).copy()
         if not np.all(np.isfinite(noise)) or np.any(noise <= 0):

@@ -30,26 +30,80 @@ class Compensation(Protocol):
         """Forget the model's memory."""
 
     def update(self, measurement) -> None:
-        """See this sample's measurement (before :meth:`to_input` / :meth:`to_virtual`)."""
+        """See this sample's measurement (before :meth:`to_input` / :meth:`to_virtual`).
+
+        Parameters
+        ----------
+        measurement : Measurement
+            This sample's measurement.
+        """
 
     def to_input(self, v: float) -> float:
-        """The actuator input that gives the virtual input ``v`` now."""
+        """The actuator input that gives the virtual input ``v`` now.
+
+        Parameters
+        ----------
+        v : float
+            Virtual input.
+
+        Returns
+        -------
+        float
+            Actuator input.
+        """
 
     def to_virtual(self, u: float) -> float:
-        """The virtual input that the actuator input ``u`` gives now (monotone in ``u``)."""
+        """The virtual input that the actuator input ``u`` gives now (monotone in ``u``).
+
+        Parameters
+        ----------
+        u : float
+            Actuator input.
+
+        Returns
+        -------
+        float
+            Virtual input.
+        """
 
     def applied(self, u: float) -> None:
-        """The input actually sent this sample (input-driven memories follow it)."""
+        """The input actually sent this sample (input-driven memories follow it).
+
+        Parameters
+        ----------
+        u : float
+            Actuator input sent.
+        """
 
     def inputs_along(self, vs) -> np.ndarray:
         """The actuator inputs that give the virtual inputs ``vs`` one after another.
 
-        They start from the present memory, which is left as it is (NaN where one is out of
-        reach).
+        They start from the present memory, which is left as it is.
+
+        Parameters
+        ----------
+        vs : array_like
+            Virtual inputs, one per sample.
+
+        Returns
+        -------
+        ndarray
+            One actuator input per virtual input (NaN where one is out of reach).
         """
 
     def sensors(self, measurement) -> np.ndarray:
-        """The linear model's sensor vector for this measurement."""
+        """The linear model's sensor vector for this measurement.
+
+        Parameters
+        ----------
+        measurement : Measurement
+            This sample's measurement.
+
+        Returns
+        -------
+        ndarray
+            The sensor vector, in the order of the model's ``sensor_names``.
+        """
 
 
 @dataclass(frozen=True)
@@ -74,7 +128,19 @@ class LinearMpcSettings:
 
 
 def linearise(model: PredictionModel) -> dict[str, np.ndarray]:
-    """``x+ = A x + B v + Bd d + f0``, ``y = Cy x + Dy d + y0``, ``z = Cz x + Dz d + z0`` at the origin."""
+    """``x+ = A x + B v + Bd d + f0``, ``y = Cy x + Dy d + y0``, ``z = Cz x + Dz d + z0`` at the origin.
+
+    Parameters
+    ----------
+    model : PredictionModel
+        The model to linearise.
+
+    Returns
+    -------
+    dict
+        ``A``, ``B``, ``Bd``, ``Cy``, ``Dy``, ``Cz``, ``Dz`` (matrices) and ``f0``, ``y0``, ``z0``
+        (vectors), as ndarrays.
+    """
     x, u, d = ca.SX.sym("x", model.nx), ca.SX.sym("u", model.nu), ca.SX.sym("d", model.nd)
     nxt, y, z = model.step(x, u, d), model.output(x, d), model.measure(x, d)
     parts = ca.Function("linearised", [x, u, d],
@@ -90,7 +156,15 @@ def linearise(model: PredictionModel) -> dict[str, np.ndarray]:
 def one_sample_delay(sample_period: float) -> PredictionModel:
     """The remainder of a feed-forward actuator whose inverse is exact and static.
 
-    The output is the virtual input one sample later; no sensors, no disturbance.
+    Parameters
+    ----------
+    sample_period : float
+        Sample period (s).
+
+    Returns
+    -------
+    PredictionModel
+        One state; the output is the virtual input one sample later; no sensors, no disturbance.
     """
     x, v, d = ca.SX.sym("x", 1), ca.SX.sym("v"), ca.SX.sym("d", 0)
     return PredictionModel(
@@ -209,7 +283,21 @@ class InverseLinearMpc:
         self._P = self._p0.copy()
 
     def step(self, measurement, ref_window) -> float:
-        """One sample: a measurement and the references ``r_k..r_{k+N}`` in, the input out."""
+        """One sample: a measurement and the references ``r_k..r_{k+N}`` in, the input out.
+
+        Parameters
+        ----------
+        measurement : Measurement
+            This sample's measurement.
+        ref_window : array_like
+            References ``r_k..r_{k+N}``; the QP tracks ``r_{k+1}..r_{k+N}``.
+
+        Returns
+        -------
+        float
+            The actuator input sent, inside the bounds (the last one where the compensation
+            gives no finite input).
+        """
         v = self._solve(measurement, ref_window)
         u = self.compensation.to_input(v)
         u_prev = self._u_last if self._started else 0.0
@@ -227,6 +315,18 @@ class InverseLinearMpc:
         sent.
 
         This is the warm start ``nmpc.inverse_plan=linear-mpc`` gives the NMPC.
+
+        Parameters
+        ----------
+        measurement : Measurement
+            This sample's measurement.
+        ref_window : array_like
+            References ``r_k..r_{k+N}``, as in :meth:`step`.
+
+        Returns
+        -------
+        ndarray
+            The planned actuator inputs ``u_0..u_{N−1}``.
         """
         v = self._solve(measurement, ref_window)
         virtual = self._plan if self._plan is not None else np.full(self.horizon, v)
@@ -242,7 +342,13 @@ class InverseLinearMpc:
             prepare(self.horizon)
 
     def applied(self, u: float) -> None:
-        """The input sent this sample: the Kalman filter and the compensation's memory follow it."""
+        """The input sent this sample: the Kalman filter and the compensation's memory follow it.
+
+        Parameters
+        ----------
+        u : float
+            Actuator input sent.
+        """
         self._v_last = self.compensation.to_virtual(u)
         self.compensation.applied(u)
         self._u_last = u
@@ -305,5 +411,11 @@ class InverseLinearMpc:
         return v
 
     def stats(self) -> dict:
-        """QP failures (each one a fallback)."""
+        """QP failures (each one a fallback).
+
+        Returns
+        -------
+        dict
+            ``name`` (``osqp``), ``failures`` and ``fallbacks`` (the same count).
+        """
         return {"name": "osqp", "failures": self.failures, "fallbacks": self.failures}

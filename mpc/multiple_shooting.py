@@ -119,7 +119,7 @@ class MultipleShootingProblem(TrackingProblem):
         the output sensitivities to the inputs propagated forward (``S_{k+1} = A_k S_k``,
         plus ``B_k`` as the newest column; ``solver.rti.sensitivity_block`` pads them).
         Differentiating the unrolled rollout instead gives the same numbers but one expression
-        per entry of J: for pam at N = 20, 3.2 MB of C that took 45–100 s to compile.
+        per entry of J: far more C and a far longer compile (docs/realtime.md).
         """
         m, s = self.model, self.settings
         N, nx, nd = s.horizon, m.nx, m.nd
@@ -184,6 +184,12 @@ class MultipleShootingProblem(TrackingProblem):
             the condensed RTI step, which rolls out itself.
         u_ff : array_like, shape (N,), optional
             Feed-forward inputs that ``r_input`` pulls towards (default ``u_guess``).
+
+        Returns
+        -------
+        Solution
+            The plan, with the predicted states (a condensed RTI step rolls them out from the
+            planned inputs; NaN when they are not finite).
         """
         N, nx = self.horizon, self.model.nx
         condition = np.asarray(condition, float).ravel()

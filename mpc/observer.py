@@ -78,7 +78,17 @@ class StateObserver:
     def update(self, z, u_last: float | None) -> bool:
         """Time update with the input applied last sample (None: first sample), measurement update.
 
-        Returns True when the estimate was not finite and restarted from ``z``.
+        Parameters
+        ----------
+        z : array_like
+            The sensor vector of this sample.
+        u_last : float or None
+            The input applied last sample (None: first sample, a start from ``z``).
+
+        Returns
+        -------
+        bool
+            True when the estimate was not finite and restarted from ``z``.
         """
         ekf = self.ekf
         if u_last is None:
@@ -93,11 +103,33 @@ class StateObserver:
         return True
 
     def estimate(self, horizon: int) -> Estimate:
-        """The current estimate."""
+        """The current estimate.
+
+        Parameters
+        ----------
+        horizon : int
+            Prediction horizon (samples); not used here (as :meth:`MemoryObserver.estimate`).
+
+        Returns
+        -------
+        Estimate
+            Copies of the EKF's ``x`` and ``d``.
+        """
         return Estimate(self.ekf.x.copy(), self.ekf.d.copy())
 
     def condition(self, estimate: Estimate) -> np.ndarray:
-        """``[x; d]``: the multiple-shooting problem's initial condition."""
+        """``[x; d]``: the multiple-shooting problem's initial condition.
+
+        Parameters
+        ----------
+        estimate : Estimate
+            An estimate of this observer.
+
+        Returns
+        -------
+        ndarray
+            ``[x; d]``.
+        """
         return np.concatenate((estimate.x, estimate.d))
 
 
@@ -179,7 +211,17 @@ class MemoryObserver:
     def update(self, z, u_last: float | None) -> bool:
         """Run the exact memory with the input applied last sample (None: first sample), then the EKF.
 
-        Returns True when the estimate was not finite and restarted from ``z``.
+        Parameters
+        ----------
+        z : array_like
+            The sensor vector of this sample.
+        u_last : float or None
+            The input applied last sample (None: first sample, a start from ``z``).
+
+        Returns
+        -------
+        bool
+            True when the estimate was not finite and restarted from ``z``.
         """
         if u_last is None:
             self._restart(z)
@@ -214,7 +256,20 @@ class MemoryObserver:
         return np.concatenate((x_dyn, self.hysteresis_state, self.queue))
 
     def estimate(self, horizon: int) -> Estimate:
-        """The current estimate (with the creep history over ``horizon`` samples, if any)."""
+        """The current estimate (with the creep history over ``horizon`` samples, if any).
+
+        Parameters
+        ----------
+        horizon : int
+            Prediction horizon (samples) of the creep history terms.
+
+        Returns
+        -------
+        Estimate
+            Copies of the state (for a creep model: of its dynamics; else the whole model's
+            state), the disturbance, the hysteresis state, the creep history (None without
+            creep) and the dead-time queue.
+        """
         history = self.creep.history_terms(horizon) if self.creep is not None else None
         if self.creep_buffer is not None:
             if horizon not in self._history:
@@ -227,7 +282,15 @@ class MemoryObserver:
     def condition(self, estimate: Estimate) -> np.ndarray:
         """The problem's initial condition.
 
-        ``[x; d]`` (Markov model) or the creep model's ``[hysteresis state, x_dyn, d, history]``.
+        Parameters
+        ----------
+        estimate : Estimate
+            An estimate of this observer.
+
+        Returns
+        -------
+        ndarray
+            ``[x; d]`` (Markov model) or the creep model's ``[hysteresis state, x_dyn, d, history]``.
         """
         if self.creeping:
             return np.concatenate((estimate.hysteresis, estimate.x, estimate.d, estimate.history))
@@ -237,8 +300,19 @@ class MemoryObserver:
 def exact_step(hysteresis, rest_input: float = 0.0) -> Callable:
     """``(state, u) -> (state, y)`` of ``hysteresis`` in NumPy.
 
-    Its exact step evaluated as a CasADi Function where the step accepts CasADi expressions (the
-    same arithmetic as a generated controller, to the last bit), else the model's own ``step``.
+    Parameters
+    ----------
+    hysteresis : HysteresisModel
+        The model whose exact ``step`` runs.
+    rest_input : float, optional
+        Rest input; only the size of the initial state at it is used.
+
+    Returns
+    -------
+    callable
+        Its exact step evaluated as a CasADi Function where the step accepts CasADi expressions
+        (the same arithmetic as a generated controller, to the last bit), else the model's own
+        ``step``.
     """
     n = len(hysteresis.initial_state(rest_input))
     state, u = ca.SX.sym("state", n), ca.SX.sym("u")
@@ -265,6 +339,25 @@ def memory_inverse(memory: InputMemory, sample_period: float) -> Callable[[Estim
     creep inverse the creep-free output (the GL sum solved for its newest term), and the
     hysteresis model's ``inverse_step`` the input.
     A target the hysteresis cannot reach keeps the previous input (NaN before the first).
+
+    Parameters
+    ----------
+    memory : InputMemory
+        The parts of an input-driven model (``model.memory``).
+    sample_period : float
+        Sample period (s), for the creep inverse.
+
+    Returns
+    -------
+    callable
+        ``(estimate, refs) -> inputs``, one input per reference; NumPy, or CasADi expressions
+        for a symbolic estimate. Its ``prepare(estimate, n)`` builds (and compiles) the inverse
+        for ``n`` references ahead of the first sample; ``hysteresis`` is the model inverted.
+
+    Raises
+    ------
+    ValueError
+        When the model's dynamics give no ``steady_input``.
     """
     if memory.steady_input is None:
         raise ValueError("no inverse warm start: the model's Dynamics give no steady_input (the hysteresis "
@@ -292,7 +385,7 @@ def memory_inverse(memory: InputMemory, sample_period: float) -> Callable[[Estim
             except Exception:  # noqa: BLE001 - no CasADi form: the NumPy steps below
                 functions[n, sizes] = None
             else:
-                # compiled: the same numbers, dea's inverse in 0.12 ms instead of 1.2 ms per call
+                # compiled: the same numbers, several times faster
                 functions[n, sizes] = compiled_or_slower(fun, "the inverse model runs in-process, slower")
         return functions[n, sizes]
 

@@ -43,7 +43,26 @@ class Solution:
 def nlp_solver(name: str, nlp: dict, solver: str, settings: NlpSettings) -> ca.Function:
     """IPOPT or sqpmethod + qrqp for ``nlp``, quiet, with the settings and pass-through options.
 
-    Raises ``ValueError`` naming an option the solver does not know.
+    Parameters
+    ----------
+    name : str
+        Name of the solver Function.
+    nlp : dict
+        The NLP as ``casadi.nlpsol`` takes it (``x``, ``f``, ``g``, ``p``).
+    solver : str
+        ``ipopt`` for IPOPT, anything else for sqpmethod + qrqp.
+    settings : NlpSettings
+        Iteration limit, tolerance, warm multipliers (IPOPT) and pass-through options.
+
+    Returns
+    -------
+    casadi.Function
+        The solver.
+
+    Raises
+    ------
+    ValueError
+        Naming an option the solver does not know.
     """
     s = settings
     if solver == "ipopt":
@@ -101,7 +120,13 @@ class TrackingProblem:
         return self.settings.horizon
 
     def parameter_layout(self) -> dict[str, slice]:
-        """Where each part of the parameter vector ``p`` sits."""
+        """Where each part of the parameter vector ``p`` sits.
+
+        Returns
+        -------
+        dict
+            ``condition``, ``u_prev``, ``ref`` and ``u_ff``, each a slice of ``p``.
+        """
         n, N = self.n_condition, self.horizon
         return {"condition": slice(0, n), "u_prev": slice(n, n + 1), "ref": slice(n + 1, n + 1 + N),
                 "u_ff": slice(n + 1 + N, n + 1 + 2 * N)}
@@ -156,9 +181,43 @@ class TrackingProblem:
         return w, success, str(stats.get("return_status", "")), int(stats.get("iter_count", -1)), elapsed
 
     def feasible_start(self, u_guess, u_prev: float) -> np.ndarray:
-        """The guess made input- and rate-feasible (backtracking RTI steps need that)."""
+        """The guess made input- and rate-feasible (backtracking RTI steps need that).
+
+        Parameters
+        ----------
+        u_guess : array_like
+            The guessed inputs.
+        u_prev : float
+            Input applied in the previous sample.
+
+        Returns
+        -------
+        ndarray
+            The feasible inputs (:func:`hystmpc.mpc.rti.feasible_guess`).
+        """
         return feasible_guess(u_guess, u_prev, self.u_min, self.u_max, self.du_max)
 
     def solve(self, condition, u_prev: float, ref, u_guess, x_guess=None, u_ff=None) -> Solution:
-        """Solve for the references ``ref`` (r_{k+1..k+N}) from ``condition``."""
+        """Solve for the references ``ref`` (r_{k+1..k+N}) from ``condition``.
+
+        Parameters
+        ----------
+        condition : array_like
+            What the estimator hands over (the part ``condition`` of ``p``).
+        u_prev : float
+            Input applied in the previous sample (for the rate bound).
+        ref : array_like, shape (N,)
+            Output references for the predicted samples 1..N.
+        u_guess : array_like, shape (N,)
+            Initial input guess.
+        x_guess : array_like, optional
+            Initial state guess, for problems with states as unknowns.
+        u_ff : array_like, shape (N,), optional
+            Feed-forward inputs that ``r_input`` pulls towards (default ``u_guess``).
+
+        Returns
+        -------
+        Solution
+            The plan and the solver's report.
+        """
         raise NotImplementedError

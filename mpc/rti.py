@@ -35,6 +35,8 @@ def rti_function(residual: ca.Function, constraints: ca.Function, lbg, ubg, lbx,
         ``(w, p) -> g`` with ``lbg <= g <= ubg`` (SX).
     lbg, ubg, lbx, ubx : array_like
         Constraint and variable bounds (constants baked into the function).
+    name : str, optional
+        Name of the Function (and prefix of its QP solver's).
     step_lengths : tuple of float, optional
         If given, the step taken is the one of ``1`` and these fractions with the lowest cost
         (a fixed backtracking, code-generatable). Only sound where every constraint is
@@ -51,12 +53,18 @@ def rti_function(residual: ca.Function, constraints: ca.Function, lbg, ubg, lbx,
         solver for small dense QPs (through CasADi; the generated C calls the DAQP library
         that CasADi ships). ``ipm``: :func:`hystmpc.mpc.qp.interior_point_qp` with
         ``qp_iterations`` iterations (all bounds finite).
+    qp_iterations : int, optional
+        Iterations of the ``ipm`` QP.
 
-    The second output, ``qp_error``, says how far the QP answer is from trustworthy: for
-    ``ipm`` its final residual, for ``qrqp`` the largest constraint violation of its answer,
-    each row's divided by the larger of its half width and 1, for ``daqp`` the larger of
-    that violation and the relative stationarity residual. Callers count a step above
-    :data:`QP_TOLERANCE` as a failed solve.
+    Returns
+    -------
+    casadi.Function
+        ``rti_step(w, p) -> (w_next, qp_error)``. The second output, ``qp_error``, says how far
+        the QP answer is from trustworthy: for ``ipm`` its final residual, for ``qrqp`` the
+        largest constraint violation of its answer, each row's divided by the larger of its
+        half width and 1, for ``daqp`` the larger of that violation and the relative
+        stationarity residual. Callers count a step above :data:`QP_TOLERANCE` as a failed
+        solve.
     """
     lower = np.concatenate((np.ravel(lbx), np.ravel(lbg))).astype(float)
     upper = np.concatenate((np.ravel(ubx), np.ravel(ubg))).astype(float)
@@ -78,11 +86,37 @@ def gauss_newton_step(linearise: ca.Function, cost: ca.Function, lower, upper, n
                       line_search: str = "best") -> ca.Function:
     """``rti_step(w, p) -> (w_next, qp_error)`` from a linearisation and a cost.
 
-    ``linearise(w, p) -> (H, Jᵀr, A, g[, Σ r²])`` gives the Gauss–Newton Hessian
-    (regularised), the gradient, the constraints ``g`` with their Jacobian ``A``, and the
-    cost at ``w`` (read by ``line_search='descent'`` only); ``cost(w, p)`` is ``Σ r²`` (used
-    by ``step_lengths`` only). ``lower`` and ``upper`` bound ``[w; g]``. The other
-    parameters are :func:`rti_function`'s.
+    Parameters
+    ----------
+    linearise : casadi.Function
+        ``linearise(w, p) -> (H, Jᵀr, A, g[, Σ r²])``: the Gauss–Newton Hessian (regularised),
+        the gradient, the constraints ``g`` with their Jacobian ``A``, and the cost at ``w``
+        (read by ``line_search='descent'`` only).
+    cost : casadi.Function
+        ``cost(w, p)``, ``Σ r²`` (used by ``step_lengths`` only).
+    lower, upper : array_like
+        Bounds of ``[w; g]``.
+    name : str, optional
+        As in :func:`rti_function`.
+    step_lengths : tuple of float, optional
+        As in :func:`rti_function`.
+    qp : {"qrqp", "daqp", "ipm"}
+        As in :func:`rti_function`.
+    qp_iterations : int, optional
+        As in :func:`rti_function`.
+    line_search : {"best", "descent"}
+        As in :func:`rti_function`.
+
+    Returns
+    -------
+    casadi.Function
+        ``rti_step(w, p) -> (w_next, qp_error)``, as :func:`rti_function` returns.
+
+    Raises
+    ------
+    ValueError
+        For an unknown ``line_search`` or ``qp``, ``descent`` without the cost output of
+        ``linearise``, or ``ipm`` without finite bounds ``lower < upper``.
     """
     if line_search not in LINE_SEARCHES:
         raise ValueError(f"line_search {line_search!r} is unknown; allowed: {', '.join(LINE_SEARCHES)}")
@@ -188,6 +222,22 @@ def feasible_guess(u_guess, u_prev: float, u_min: float, u_max: float, du_max: f
     The backtracking RTI step takes fractions of the QP step; they stay feasible only when
     the step starts from a feasible point (a convex combination of two feasible points).
     An inverse-model guess after a reference jump is often not rate-feasible.
+
+    Parameters
+    ----------
+    u_guess : array_like
+        The guessed inputs ``u_0..u_{N−1}``.
+    u_prev : float
+        The input sent last (clipped to the bounds first), the predecessor of ``u_0``.
+    u_min, u_max : float
+        Input bounds.
+    du_max : float
+        Largest change per sample (``inf``: none).
+
+    Returns
+    -------
+    ndarray
+        The feasible inputs.
     """
     u = np.clip(np.asarray(u_guess, float).ravel(), u_min, u_max)
     if np.isfinite(du_max):
@@ -201,10 +251,29 @@ def rti_steps(rti: ca.Function, w0, p, iterations: int,
               extra_step_tolerance: float = np.inf) -> tuple[np.ndarray, float, int]:
     """``iterations`` RTI steps from ``w0``, and one more when the last moved the iterate enough.
 
-    The extra step comes when the last moved an entry of the iterate by more than
-    ``extra_step_tolerance``. Returns the last iterate, the worst ``qp_error`` (NaN if any was;
-    infinite when an iterate is not finite, which ends the steps: an in-process QP refuses NaN
-    bounds) and the steps taken.
+    Parameters
+    ----------
+    rti : casadi.Function
+        ``rti_step(w, p) -> (w_next, qp_error)``.
+    w0 : array_like
+        The first iterate.
+    p : array_like
+        The step's parameters.
+    iterations : int
+        Steps to take.
+    extra_step_tolerance : float, optional
+        One more step when the last moved an entry of the iterate by more than this
+        (``inf``: never).
+
+    Returns
+    -------
+    w : ndarray
+        The last iterate.
+    worst : float
+        The worst ``qp_error`` (NaN if any was; infinite when an iterate is not finite, which
+        ends the steps: an in-process QP refuses NaN bounds).
+    taken : int
+        The steps taken.
     """
     w, worst = np.asarray(w0, float), 0.0
     taken, moved = 0, np.inf

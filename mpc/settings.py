@@ -51,7 +51,7 @@ class NmpcSettings:
     """Weight on the squared deviation of the input from the inverse-model input."""
     solver: str = "rti-c"
     """Solver variant, one of :data:`SOLVERS`; its settings are ``solver.<name>``. The
-    default, ``rti-c``, tracked within 0.1 % of IPOPT's RMSE on pam at a tenth of its time
+    default, ``rti-c``, tracks about as well as IPOPT in a fraction of its time
     (docs/realtime.md); a bench may choose another."""
     preview: bool = True
     """Use the known future reference over the horizon; false holds the current one."""
@@ -63,16 +63,15 @@ class NmpcSettings:
     fallback) come from: ``static``: each previewed reference held at rest, through the
     inverse models; ``linear-mpc``: the plan of the bench's ``inverse-lmpc`` baseline (a
     linear MPC on the dynamics the inverse leaves, its virtual inputs through the inverse
-    hysteresis model), which also sees the dynamics and the disturbance estimate (dea: RMSE
-    0.0012 -> 0.0010 mm on single-sine). Not in the generated controller yet."""
+    hysteresis model), which also sees the dynamics and the disturbance estimate (docs/dea.md).
+    Not in the generated controller yet."""
     multistart: bool = False
     """Each sample, also solve from the inverse model's inputs (unless that was the start)
     and keep the plan with the lower cost. Across a hysteresis loop the tracking problem has
-    several local minima, and the shifted plan can sit in the worse one (dea: RMSE 0.0034 ->
-    0.0013 mm on single-sine with ``r_rate`` 0.01, at twice the solves; the iteration counts
-    then add up both). Needs an inverse model and solver ``gn``, ``rti`` or ``rti-c`` (the
-    RTI step condensed onto the inputs), which report the cost compared; the generated
-    controller runs the RTI steps from both starts."""
+    several local minima, and the shifted plan can sit in the worse one (docs/dea.md). It
+    takes twice the solves; the iteration counts then add up both. Needs an inverse model
+    and solver ``gn``, ``rti`` or ``rti-c`` (the RTI step condensed onto the inputs), which
+    report the cost compared; the generated controller runs the RTI steps from both starts."""
     runtime: str = "python"
     """Where the controller runs in closed loop: ``python``; ``c``: the whole generated
     controller that ``hystmpc codegen`` writes (estimator, warm start, RTI steps,
@@ -100,6 +99,17 @@ class NmpcSettings:
 
         Checked when the controller is built, and before any work by the command line, after
         all ``--set``.
+
+        Parameters
+        ----------
+        solvers : SolverSettings, optional
+            The solvers' settings, to check against too (None: the NMPC settings alone).
+
+        Raises
+        ------
+        ValueError
+            ``multistart`` with a solver other than ``gn``, ``rti`` and ``rti-c``, or with
+            ``solver.rti.condensed=false``.
         """
         if self.multistart and self.solver not in MULTISTART_SOLVERS:
             raise ValueError(f"nmpc.multistart compares the costs that solver gn or the RTI step reports, from the "
@@ -130,7 +140,20 @@ class InputBounds:
             raise ValueError(f"rate must be > 0 (inf for none), got {self.rate}")
 
     def clip(self, u: float, last: float | None = None) -> float:
-        """``u`` moved inside the bounds (and within ``rate`` of ``last``, if given)."""
+        """``u`` moved inside the bounds (and within ``rate`` of ``last``, if given).
+
+        Parameters
+        ----------
+        u : float
+            The input.
+        last : float, optional
+            The previous input (None: no rate limit).
+
+        Returns
+        -------
+        float
+            The clipped input; the bounds win over the rate.
+        """
         if last is not None:
             u = float(np.clip(u, last - self.rate, last + self.rate))
         return float(np.clip(u, self.lower, self.upper))
@@ -205,7 +228,8 @@ class RtiSettings:
     inputs at its exact width (fastest); ``b > 0`` pads it with explicit zeros to a multiple of
     ``b`` columns (``b >= N``: dense), so generated code reuses its work memory from sample to
     sample (less RAM, more arithmetic on zeros; the same numbers to the last bit while the
-    Jacobians are finite). ``codegen --target`` picks 5 for a microcontroller."""
+    Jacobians are finite). ``codegen --target`` picks 7 for a microcontroller where none is set
+    (:data:`hystmpc.experiments.firmware.MICROCONTROLLER_SENSITIVITY_BLOCK`)."""
 
     line_search: str = "best"
     """Step length of the condensed and single-shooting steps, among 1, 1/2, 1/4 and 1/8:
@@ -215,7 +239,21 @@ class RtiSettings:
     would have lowered the cost more)."""
 
     def check_step(self, condensed: bool) -> None:
-        """Refuse the settings this RTI step would not use (``ValueError``)."""
+        """Refuse the settings this RTI step would not use (``ValueError``).
+
+        Parameters
+        ----------
+        condensed : bool
+            Whether the step is condensed onto the inputs (single shooting, or multiple
+            shooting with ``condensed``).
+
+        Raises
+        ------
+        ValueError
+            ``qp_iterations`` without ``qp=ipm``; ``sensitivity_block``, a ``line_search`` other
+            than ``best``, a finite ``extra_step_tolerance`` or ``qp=ipm`` on a step that is not
+            condensed.
+        """
         if self.qp != "ipm" and self.qp_iterations != RtiSettings.qp_iterations:
             raise ValueError(f"solver.rti.qp_iterations={self.qp_iterations} applies to solver.rti.qp=ipm only "
                              f"(qp is {self.qp})")
@@ -261,7 +299,18 @@ class SolverSettings:
     """``rti`` and ``rti-c``."""
 
     def uniform(self, **changes) -> SolverSettings:
-        """The same ``changes`` (``max_iter``, ``tol``, ...) applied to every solver that has them."""
+        """The same ``changes`` (``max_iter``, ``tol``, ...) applied to every solver that has them.
+
+        Parameters
+        ----------
+        **changes
+            Setting names and values; each group takes those among its own fields.
+
+        Returns
+        -------
+        SolverSettings
+            A copy with the changes.
+        """
         from dataclasses import fields, replace
         out = {}
         for f in fields(self):

@@ -20,8 +20,8 @@ from hystmpc.mpc.rti import REGULARISATION, gauss_newton_step, rti_function
 from hystmpc.mpc.settings import InputBounds, NmpcSettings, SolverSettings
 
 GN_COMPILE_FLAGS = ("-O1", "-ffp-contract=off")
-"""Flags of ``gn``'s compiled residual and Jacobian: on dea (N = 15, the unrolled prediction)
--O1 compiles in 7 s and runs at 71 µs per call from Python, -O0 in 2.6 s at 173 µs."""
+"""Flags of ``gn``'s compiled residual and Jacobian: on dea's unrolled prediction -O1 compiles
+more slowly than -O0 but runs faster per call (docs/dea.md, "Solver")."""
 
 
 class BufferedEvaluation:
@@ -29,6 +29,11 @@ class BufferedEvaluation:
 
     The same numbers as a call, without its conversions (on dea's Gauss–Newton evaluation and QP
     they cost more than the compiled evaluation itself).
+
+    Parameters
+    ----------
+    fun : casadi.Function
+        The Function to call.
     """
 
     def __init__(self, fun: ca.Function):
@@ -182,7 +187,7 @@ class SingleShootingProblem(TrackingProblem):
         evaluate = ca.Function("gn_eval", [U, params], [residual, ca.jacobian(residual, U)])
         # the line search's trials need the residual only; most of them are rejected
         residual_only = ca.Function("gn_residual", [U, params], [residual])
-        # compiled: the same numbers to the last bit, a fifth of the time (dea: 71 against 342 µs per call)
+        # compiled: the same numbers to the last bit, in a fraction of the time
         slower = "solver gn evaluates {} in-process, slower"
         self._gn_eval = compiled_or_slower(evaluate, slower.format("its residual and Jacobian"), GN_COMPILE_FLAGS)
         self._gn_residual = compiled_or_slower(residual_only, slower.format("its line search's residual"),
@@ -259,7 +264,25 @@ class SingleShootingProblem(TrackingProblem):
     def solve(self, condition, u_prev: float, ref, u_guess, x_guess=None, u_ff=None) -> Solution:
         """Solve for the references ``ref`` (r_{k+1..k+N}) from ``condition`` (the ``p`` of ``predict``).
 
-        ``x_guess`` is not used: the inputs are the only unknowns.
+        Parameters
+        ----------
+        condition : array_like
+            The ``p`` of ``predict``.
+        u_prev : float
+            Input applied in the previous sample (for the rate bound).
+        ref : array_like, shape (N,)
+            Output references for the predicted samples 1..N.
+        u_guess : array_like, shape (N,)
+            Initial input guess.
+        x_guess : array_like, optional
+            Not used: the inputs are the only unknowns.
+        u_ff : array_like, shape (N,), optional
+            Feed-forward inputs that ``r_input`` pulls towards (default ``u_guess``).
+
+        Returns
+        -------
+        Solution
+            The plan and the solver's report.
         """
         N = self.horizon
         u_guess = np.clip(np.asarray(u_guess, float).ravel(), self.u_min, self.u_max)

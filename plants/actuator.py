@@ -75,7 +75,18 @@ class HysteresisActuator:
         return self._sample_period
 
     def reset(self, seed: int) -> Measurement:
-        """At rest at ``rest_input``: relaxed hysteresis, dynamics at zero; seed the noise."""
+        """At rest at ``rest_input``: relaxed hysteresis, dynamics at zero; seed the noise.
+
+        Parameters
+        ----------
+        seed : int
+            Seed of the sensor noise.
+
+        Returns
+        -------
+        Measurement
+            The first measurement, at rest.
+        """
         self._rng = np.random.default_rng(seed)
         self._x = np.zeros(len(self.dynamics.state_names))
         self._hys = self.hysteresis.initial_state(self.rest_input)
@@ -98,7 +109,18 @@ class HysteresisActuator:
         return value
 
     def step(self, u: float) -> Measurement:
-        """Apply the input ``u`` for one sample (saturated at the input bounds)."""
+        """Apply the input ``u`` for one sample (saturated at the input bounds).
+
+        Parameters
+        ----------
+        u : float
+            The input; it reaches the actuator after ``delay_samples`` samples.
+
+        Returns
+        -------
+        Measurement
+            The measurement at the end of the sample.
+        """
         if not np.isfinite(u):
             raise ValueError(f"plant input must be finite, got {u}")
         self._u = float(np.clip(u, *self.input_bounds))
@@ -174,12 +196,34 @@ class BlendedActuator:
         return self.first.sample_period
 
     def reset(self, seed: int) -> Measurement:
-        """Both actuators at rest; seed the noise."""
+        """Both actuators at rest; seed the noise.
+
+        Parameters
+        ----------
+        seed : int
+            Seed of the sensor noise (and of the two actuators' own).
+
+        Returns
+        -------
+        Measurement
+            The first, blended measurement.
+        """
         self._rng = np.random.default_rng(seed)
         return self._blend(self.first.reset(seed), self.second.reset(seed))
 
     def step(self, u: float) -> Measurement:
-        """Apply the input ``u`` to both for one sample."""
+        """Apply the input ``u`` to both for one sample.
+
+        Parameters
+        ----------
+        u : float
+            The input.
+
+        Returns
+        -------
+        Measurement
+            The blended measurement at the end of the sample (no ``sensors``).
+        """
         return self._blend(self.first.step(u), self.second.step(u))
 
     def _blend(self, a: Measurement, b: Measurement) -> Measurement:

@@ -33,10 +33,31 @@ class Plant(Protocol):
 
         The measurement is read before any input is applied (a rig holds its rest input,
         settles, then reads its sensors).
+
+        Parameters
+        ----------
+        seed : int
+            Seed of the sensor noise.
+
+        Returns
+        -------
+        Measurement
+            The first measurement, at rest.
         """
 
     def step(self, u: float) -> Measurement:
-        """Apply ``u`` for one sample; the measurement at the end of it."""
+        """Apply ``u`` for one sample; the measurement at the end of it.
+
+        Parameters
+        ----------
+        u : float
+            The input, held over the sample.
+
+        Returns
+        -------
+        Measurement
+            The measurement at the end of the sample.
+        """
 
 
 class ParametrisedPlant:

@@ -79,7 +79,18 @@ class CompliantActuator(ParametrisedPlant):
     params: CompliantParams = field(default_factory=CompliantParams)
 
     def reset(self, seed: int) -> Measurement:
-        """Start at rest at zero torque on the ascending branch; seed the sensor noise."""
+        """Start at rest at zero torque on the ascending branch; seed the sensor noise.
+
+        Parameters
+        ----------
+        seed : int
+            Seed of the torque-sensor noise.
+
+        Returns
+        -------
+        Measurement
+            The first measurement, at rest.
+        """
         p = self.params
         self._rng = np.random.default_rng(seed)
         self._hys = p.hysteresis.initial_state()
@@ -91,7 +102,19 @@ class CompliantActuator(ParametrisedPlant):
         return self._measure()
 
     def step(self, theta_cmd: float) -> Measurement:
-        """Apply the motor angle command (rad) for one sample."""
+        """Apply the motor angle command (rad) for one sample.
+
+        Parameters
+        ----------
+        theta_cmd : float
+            Motor angle command (rad), clipped to ±``angle_limit``; the drive acts on it
+            ``command_delay`` samples later.
+
+        Returns
+        -------
+        Measurement
+            The measurement at the end of the sample.
+        """
         if not np.isfinite(theta_cmd):
             raise ValueError(f"plant input must be finite, got {theta_cmd}")
         p = self.params
@@ -121,7 +144,22 @@ class CompliantActuator(ParametrisedPlant):
 
 
 def servo_rhs(p: CompliantParams, x, theta_cmd) -> list:
-    """Time derivative of ``x = [θ1, θ1']`` under the position loop, without the rate limit."""
+    """Time derivative of ``x = [θ1, θ1']`` under the position loop, without the rate limit.
+
+    Parameters
+    ----------
+    p : CompliantParams
+        The actuator parameters.
+    x : array_like or SX
+        State ``[θ1, θ1']`` (rad, rad/s).
+    theta_cmd : float or SX
+        Motor angle command (rad).
+
+    Returns
+    -------
+    list
+        ``[θ1', θ1'']`` (rad/s, rad/s²).
+    """
     return [x[1], p.servo_wn**2 * (theta_cmd - x[0]) - 2 * p.servo_zeta * p.servo_wn * x[1]]
 
 
@@ -132,6 +170,22 @@ def prediction_model(p: CompliantParams, eps: float, substeps: int = 2,
     The servo (no backlash, no rate limit) moves θ1; the power-function hysteresis follows
     s(θ1), eq. (8); ``q`` is the command delay line (``p.command_delay`` samples). Sensors:
     motor angle and torque.
+
+    Parameters
+    ----------
+    p : CompliantParams
+        The nominal parameters.
+    eps : float
+        Smoothing width of the hysteresis (see its ``smooth_step``).
+    substeps : int, optional
+        RK4 steps per sample.
+    direction_eps : float, optional
+        Smoothing width of the input direction (None: ``eps``).
+
+    Returns
+    -------
+    PredictionModel
+        The model, its CasADi Functions named ``compliant...``.
     """
     dynamics = Dynamics(
         state_names=("angle", "rate"), rhs=lambda x, u, h, d: servo_rhs(p, x, u),
@@ -146,6 +200,22 @@ def inverse_inputs(p: CompliantParams, x, d, refs):
     """Motor angles that the inverse model gives for ``refs − d`` from the state ``x`` of :func:`prediction_model`.
 
     NumPy, or CasADi expressions for a generated controller.
+
+    Parameters
+    ----------
+    p : CompliantParams
+        The nominal parameters.
+    x : array_like or SX
+        State of :func:`prediction_model`.
+    d : array_like or SX
+        Its disturbance, the torque offset (N m).
+    refs : array_like or SX
+        Torque references (N m), one per sample.
+
+    Returns
+    -------
+    ndarray or SX
+        One motor angle (rad) per reference, clipped to ±``angle_limit``.
     """
     hys: PowerFunctionHysteresis = p.hysteresis
     if symbolic(x):
@@ -167,7 +237,21 @@ def inverse_inputs(p: CompliantParams, x, d, refs):
 
 
 def initial_state(p: CompliantParams, z):
-    """Model state at rest from the first sensor vector ``[motor angle, torque]`` (NumPy, or CasADi expressions)."""
+    """Model state at rest from the first sensor vector ``[motor angle, torque]`` (NumPy, or CasADi expressions).
+
+    Parameters
+    ----------
+    p : CompliantParams
+        The nominal parameters.
+    z : array_like or SX
+        Sensor vector ``[motor angle, torque]``; only the angle is read.
+
+    Returns
+    -------
+    ndarray or SX
+        State of :func:`prediction_model`: θ1 at the angle, at rest, the hysteresis started at its
+        s(θ1), the delay line filled with the angle.
+    """
     if symbolic(z):
         s = p.geometry.s(z[0], xp=ca)
         return ca.vertcat(z[0], 0.0, p.hysteresis.initial_state(s), ca.repmat(z[0], p.command_delay, 1))
@@ -181,6 +265,18 @@ def linear_model(p: CompliantParams, substeps: int = 2) -> PredictionModel:
     The virtual torque ``v`` (the power-function model's output that the inverse compensation
     realises) follows the command as θ1 does, ``x = [τ_v, τ_v', q_1..q_D]``, ``y = τ_v + d``.
     Sensors: ``τ_v`` (the model's torque at the measured motor angle) and the torque.
+
+    Parameters
+    ----------
+    p : CompliantParams
+        The nominal parameters.
+    substeps : int, optional
+        RK4 steps per sample.
+
+    Returns
+    -------
+    PredictionModel
+        Input ``v`` (N m), sensors named ``angle`` and ``y``.
     """
     D = p.command_delay
     x, v, d = ca.SX.sym("x", 2 + D), ca.SX.sym("v"), ca.SX.sym("d")

@@ -68,22 +68,80 @@ class DeaParams:
         return self.fckp.sample_period
 
     def f(self, x1, x2):
-        """Hyperelastic and damping acceleration (mm/s²)."""
+        """Hyperelastic and damping acceleration (mm/s²).
+
+        Parameters
+        ----------
+        x1 : float or SX
+            Displacement (mm).
+        x2 : float or SX
+            Velocity (mm/s).
+
+        Returns
+        -------
+        float or SX
+            ``−ω² (x1 + β x1³) − 2 ζ ω x2`` (mm/s²).
+        """
         w = self.natural_frequency
         return -w * w * (x1 + self.stiffening * x1**3) - 2 * self.damping_ratio * w * x2
 
     def g(self, x1, tanh=np.tanh):
-        """Electromechanical gain (1/s²), bounded in ω²(1 ± γ)."""
+        """Electromechanical gain (1/s²), bounded in ω²(1 ± γ).
+
+        Parameters
+        ----------
+        x1 : float or SX
+            Displacement (mm).
+        tanh : callable, optional
+            The tanh to use: ``np.tanh`` (default) or ``ca.tanh`` on CasADi expressions.
+
+        Returns
+        -------
+        float or SX
+            ``ω² (1 + γ tanh(x1 / 2 mm))`` (1/s²).
+        """
         return self.natural_frequency**2 * (1 + self.gain_variation * tanh(x1 / 2.0))
 
 
 def mechanics_rhs(p: DeaParams, x, w, extra_acceleration, tanh=np.tanh) -> list:
-    """Time derivative of ``x = [x1, x2]`` (mm, mm/s) driven by the FCKP output ``w`` (mm)."""
+    """Time derivative of ``x = [x1, x2]`` (mm, mm/s) driven by the FCKP output ``w`` (mm).
+
+    Parameters
+    ----------
+    p : DeaParams
+        The plant parameters.
+    x : array_like or SX
+        State ``[x1, x2]`` (mm, mm/s).
+    w : float or SX
+        FCKP output (mm).
+    extra_acceleration : float or SX
+        Added to ``x2'``, e.g. the disturbance d(t) (mm/s²).
+    tanh : callable, optional
+        As in :meth:`DeaParams.g`.
+
+    Returns
+    -------
+    list
+        ``[x1', x2']`` (mm/s, mm/s²).
+    """
     return [x[1], p.f(x[0], x[1]) + p.g(x[0], tanh=tanh) * w + extra_acceleration]
 
 
 def steady_output_input(p: DeaParams, y):
-    """The FCKP output W that holds the displacement at ``y`` at rest: ``f(y, 0) + g(y) W = 0``."""
+    """The FCKP output W that holds the displacement at ``y`` at rest: ``f(y, 0) + g(y) W = 0``.
+
+    Parameters
+    ----------
+    p : DeaParams
+        The plant parameters.
+    y : float, array_like or SX
+        Displacement (mm).
+
+    Returns
+    -------
+    ndarray or SX
+        W (mm), of the shape of ``y``; a CasADi expression for a symbolic ``y``.
+    """
     tanh = ca.tanh if symbolic(y) else np.tanh
     y = y if symbolic(y) else np.asarray(y, float)
     return (y + p.stiffening * y**3) / (1 + p.gain_variation * tanh(y / 2.0))
@@ -92,8 +150,8 @@ def steady_output_input(p: DeaParams, y):
 LEARNED_GAIN_RANGE = (-0.5, 1.0)
 """The model uses a learned relative gain error of W clipped to this range (half to twice the
 nominal stroke). Outside it the model does not depend on the estimate, so an estimate that
-left it would not be pulled back (on a membrane with a 19 % longer stroke it reached 0.38
-with a process noise of 1e-6, and stays near 0.12 with dea's 1e-7)."""
+left it would not be pulled back (on a membrane with a 19 % longer stroke the estimate went
+much higher with a process noise of 1e-6 than with dea's 1e-7)."""
 
 
 def _bounded_gain(error):
@@ -106,10 +164,25 @@ def prediction_model(p: DeaParams, eps: float, direction_eps: float | None = Non
     """The NMPC's model: smooth FCKP in volts, the GL creep integral, the nominal mechanics.
 
     ``d`` adds to the FCKP output W (an input disturbance); the sensor is the laser. The
-    creep history is a parameter of the horizon prediction (docs/dea.md, "Model"). With
-    ``learn_gain``, ``d = [offset, e]``: the mechanics see ``(1 + e) W + offset``, ``e`` a
-    relative error of the stroke (the static gain) that the estimator learns, used within
-    :data:`LEARNED_GAIN_RANGE`.
+    creep history is a parameter of the horizon prediction (docs/dea.md, "Model").
+
+    Parameters
+    ----------
+    p : DeaParams
+        The nominal parameters.
+    eps : float
+        Smoothing width of the FCKP (see :meth:`Fckp.smooth_step`).
+    direction_eps : float, optional
+        Smoothing width of the input direction (None: ``eps``).
+    learn_gain : bool, optional
+        Make ``d = [offset, e]``: the mechanics see ``(1 + e) W + offset``, ``e`` a relative
+        error of the stroke (the static gain) that the estimator learns, used within
+        :data:`LEARNED_GAIN_RANGE`.
+
+    Returns
+    -------
+    CreepPredictionModel
+        The model, its CasADi Functions named ``dea...``.
     """
     if learn_gain:
         def rhs(x, u, h, d):
@@ -134,6 +207,20 @@ def linear_model(p: DeaParams, operating_point: float = 1.5, substeps: int = 2) 
     They are driven by the FCKP output W (the virtual input of ``inverse-lmpc``) plus an input
     disturbance ``d`` (mm, as in :func:`prediction_model`); the creep is left to ``d``. Sensor:
     the laser.
+
+    Parameters
+    ----------
+    p : DeaParams
+        The nominal parameters.
+    operating_point : float, optional
+        Displacement to linearise at (mm), at rest.
+    substeps : int, optional
+        RK4 steps per sample.
+
+    Returns
+    -------
+    PredictionModel
+        Input W (mm), state ``[displacement, velocity]``, output and measurement the displacement.
     """
     x, w, d = ca.SX.sym("x", 2), ca.SX.sym("w"), ca.SX.sym("d")
     x0 = ca.DM([operating_point, 0.0])
@@ -156,7 +243,22 @@ def linear_model(p: DeaParams, operating_point: float = 1.5, substeps: int = 2) 
 
 
 def disturbance(t, amplitude: float, omega: float):
-    """d(t): two slow sines, bounded by 1.5 ω² · amplitude (mm/s²)."""
+    """d(t): two slow sines, bounded by 1.5 ω² · amplitude (mm/s²).
+
+    Parameters
+    ----------
+    t : float or ndarray
+        Time (s).
+    amplitude : float
+        Amplitude as an equivalent static displacement (mm).
+    omega : float
+        ω of the membrane (rad/s).
+
+    Returns
+    -------
+    float or ndarray
+        d(t) (mm/s²).
+    """
     return amplitude * omega**2 * (np.sin(2 * np.pi * 0.07 * t) + 0.5 * np.sin(2 * np.pi * 0.31 * t + 1.0))
 
 
@@ -171,7 +273,18 @@ class DeaActuator(ParametrisedPlant):
         super().__post_init__()
 
     def reset(self, seed: int) -> Measurement:
-        """At rest at zero volts, demagnetised, empty creep memory; seed the sensor noise."""
+        """At rest at zero volts, demagnetised, empty creep memory; seed the sensor noise.
+
+        Parameters
+        ----------
+        seed : int
+            Seed of the sensor noise.
+
+        Returns
+        -------
+        Measurement
+            The first measurement, at rest.
+        """
         self._rng = np.random.default_rng(seed)
         self._kp = self.model.initial_state()
         self._creep = self.model.creep()
@@ -182,7 +295,18 @@ class DeaActuator(ParametrisedPlant):
         return self._measure()
 
     def step(self, u: float) -> Measurement:
-        """Apply the voltage command ``u`` (V) for one sample."""
+        """Apply the voltage command ``u`` (V) for one sample.
+
+        Parameters
+        ----------
+        u : float
+            Voltage command (V), clipped to [0, ``u_max``].
+
+        Returns
+        -------
+        Measurement
+            The measurement at the end of the sample.
+        """
         if not np.isfinite(u):
             raise ValueError(f"plant input must be finite, got {u}")
         p = self.params

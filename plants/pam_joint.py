@@ -119,27 +119,110 @@ class PamJointParams:
 
 
 def torque_slope(p: PamJointParams, theta_deg, xp=np):
-    """Constraint-model slope a(θ) in N m/bar, eq. (1)."""
+    """Constraint-model slope a(θ) in N m/bar, eq. (1).
+
+    Parameters
+    ----------
+    p : PamJointParams
+        The joint parameters.
+    theta_deg : float, ndarray or SX
+        Joint angle (deg).
+    xp : module, optional
+        ``np``, or ``ca`` for CasADi expressions (not used: the slope is a polynomial).
+
+    Returns
+    -------
+    float, ndarray or SX
+        a(θ) (N m/bar).
+    """
     return p.torque_per_bar * (1.0 - p.torque_per_bar_drop * (theta_deg / 40.0) ** 2)
 
 
 def torque_intercept(p: PamJointParams, theta_deg, xp=np):
-    """Constraint-model intercept b(θ) in N m, eq. (1)."""
+    """Constraint-model intercept b(θ) in N m, eq. (1).
+
+    Parameters
+    ----------
+    p : PamJointParams
+        The joint parameters.
+    theta_deg : float, ndarray or SX
+        Joint angle (deg).
+    xp : module, optional
+        ``np``, or ``ca`` for CasADi expressions (not used: the intercept is a polynomial).
+
+    Returns
+    -------
+    float, ndarray or SX
+        b(θ) (N m).
+    """
     return -p.passive_stiffness * theta_deg * DEG * (1.0 + p.passive_stiffening * (theta_deg / 40.0) ** 2)
 
 
 def gravity_torque(p: PamJointParams, theta_deg, xp=np):
-    """Torque the payload exerts to pull the lever back to 0 (N m)."""
+    """Torque the payload exerts to pull the lever back to 0 (N m).
+
+    Parameters
+    ----------
+    p : PamJointParams
+        The joint parameters.
+    theta_deg : float, ndarray or SX
+        Joint angle (deg).
+    xp : module, optional
+        ``np``, or ``ca`` for CasADi expressions.
+
+    Returns
+    -------
+    float, ndarray or SX
+        ``m g L sin θ`` (N m).
+    """
     return p.payload_kg * GRAVITY * p.lever_m * xp.sin(theta_deg * DEG)
 
 
 def constraint_pressure(p: PamJointParams, theta_deg, xp=np):
-    """Δp_cons, eq. (2): pressure difference that holds θ against the payload, no hysteresis."""
+    """Δp_cons, eq. (2): pressure difference that holds θ against the payload, no hysteresis.
+
+    Parameters
+    ----------
+    p : PamJointParams
+        The joint parameters.
+    theta_deg : float, ndarray or SX
+        Joint angle (deg).
+    xp : module, optional
+        ``np``, or ``ca`` for CasADi expressions.
+
+    Returns
+    -------
+    float, ndarray or SX
+        Δp_cons (bar).
+    """
     return (gravity_torque(p, theta_deg, xp) - torque_intercept(p, theta_deg, xp)) / torque_slope(p, theta_deg, xp)
 
 
 def joint_acceleration(p: PamJointParams, theta_deg, omega_deg, dp, dp_hys, extra_torque, xp=np):
-    """θ'' in deg/s² from the torque balance (see module docstring)."""
+    """θ'' in deg/s² from the torque balance (see module docstring).
+
+    Parameters
+    ----------
+    p : PamJointParams
+        The joint parameters.
+    theta_deg : float or SX
+        Joint angle θ (deg).
+    omega_deg : float or SX
+        Joint rate ω (deg/s).
+    dp : float or SX
+        Pressure difference Δp (bar).
+    dp_hys : float or SX
+        Hysteresis pressure Δp_hys (bar).
+    extra_torque : float or SX
+        Torque added to the balance, e.g. the creep (N m).
+    xp : module, optional
+        ``np``, or ``ca`` for CasADi expressions.
+
+    Returns
+    -------
+    float or SX
+        θ'' (deg/s²).
+    """
     torque = (torque_slope(p, theta_deg, xp) * (dp - dp_hys) + torque_intercept(p, theta_deg, xp)
               - gravity_torque(p, theta_deg, xp) - p.damping * omega_deg * DEG + extra_torque)
     return torque / p.inertia / DEG
@@ -149,8 +232,31 @@ def joint_rhs(p: PamJointParams, x, dp_cmd, dp_hys, extra_torque, xp=np, wn_scal
     """Time derivative of ``x = [θ, ω, Δp, Δp']`` (deg, deg/s, bar, bar/s).
 
     For the plant and the NMPC's model alike (see module docstring; the slew limit is the
-    plant's own). ``wn_scale`` and ``zeta_scale`` scale the pressure loop's natural frequency
-    and damping ratio (an estimator's corrections; None: 1).
+    plant's own).
+
+    Parameters
+    ----------
+    p : PamJointParams
+        The joint parameters.
+    x : array_like or SX
+        State ``[θ, ω, Δp, Δp']``.
+    dp_cmd : float or SX
+        Pressure-difference command reaching the pressure loop (bar).
+    dp_hys : float or SX
+        Hysteresis pressure Δp_hys (bar).
+    extra_torque : float or SX
+        Torque added to the balance, e.g. the creep (N m).
+    xp : module, optional
+        ``np``, or ``ca`` for CasADi expressions.
+    wn_scale : float or SX, optional
+        Scale of the pressure loop's natural frequency (an estimator's correction; None: 1).
+    zeta_scale : float or SX, optional
+        Scale of the pressure loop's damping ratio (an estimator's correction; None: 1).
+
+    Returns
+    -------
+    list
+        ``[θ', ω', Δp', Δp'']``.
     """
     theta, omega, dp, ddp = x[0], x[1], x[2], x[3]
     acc = joint_acceleration(p, theta, omega, dp, dp_hys, extra_torque, xp)
@@ -169,7 +275,7 @@ LEARNED_ERROR_RANGE = (-0.75, 3.0)
 the nominal value): at rest ωp and ζp are not observable and their estimates may wander, and
 a scale of 0 or below would divide by zero in the inverse or undamp the pressure loop. The
 estimates pass half and twice the nominal value for a few samples after some steps; a
-range that tight cost up to 20 % of RMSE on square-20 (docs/pam.md)."""
+range that tight cost accuracy on square-20 (docs/pam.md)."""
 
 
 def _bounded(error, xp=np):
@@ -185,11 +291,26 @@ def prediction_model(p: PamJointParams, eps: float, direction_eps: float | None 
     plant's creep acts), sensors: angle and pressure. The Maxwell-slip elements move with θ
     relative to the sample's start (their last input *is* θ), so a monotone θ within a
     sample gives the exact update up to eps; the command passes the ``D``-sample delay line.
-    Maxwell-slip has no direction detection: ``direction_eps`` must stay None.
 
-    ``estimates`` (names from :data:`ESTIMATES`, in that order) appends relative model
-    errors to ``d``, which the estimator then learns and the NMPC holds over the horizon;
-    the model uses each within :data:`LEARNED_ERROR_RANGE`.
+    Parameters
+    ----------
+    p : PamJointParams
+        The nominal parameters.
+    eps : float
+        Smoothing width of each Maxwell-slip element's clip (see its ``smooth_step``).
+    direction_eps : float, optional
+        Must stay None: Maxwell-slip has no direction detection.
+    substeps : int, optional
+        RK4 steps per sample.
+    estimates : tuple of str, optional
+        Names from :data:`ESTIMATES`, in that order: relative model errors appended to ``d``,
+        which the estimator then learns and the NMPC holds over the horizon; the model uses
+        each within :data:`LEARNED_ERROR_RANGE`.
+
+    Returns
+    -------
+    PredictionModel
+        The model, its CasADi Functions named ``pam...``; sensors ``y`` (angle) and ``pressure``.
     """
     if list(estimates) != [name for name in ESTIMATES if name in estimates]:  # also catches unknown names
         raise ValueError(f"estimates must be distinct names from {ESTIMATES} in that order, got {estimates}")
@@ -218,12 +339,27 @@ def prediction_model(p: PamJointParams, eps: float, direction_eps: float | None 
 def inverse_inputs(p: PamJointParams, x, d, refs, gain: bool = False):
     """Static inverse along the reference: Δp_cons(r) + Δp_hys(path) − d/a(r), eqs. (2)–(3).
 
-    From the state ``x`` of :func:`prediction_model` (NumPy, or CasADi expressions for a
-    generated controller).
+    NumPy, or CasADi expressions for a generated controller. The command reaches the pressure
+    ``D`` samples later, so input ``j`` aims at ``r_{j+D}`` (the last reference beyond the window).
 
-    The command reaches the pressure ``D`` samples later, so input ``j`` aims at ``r_{j+D}``.
-    With ``gain`` (``d = [torque, g, ...]``, :func:`prediction_model`), the muscles'
-    torque is divided by ``1 + g`` (g within :data:`LEARNED_ERROR_RANGE`).
+    Parameters
+    ----------
+    p : PamJointParams
+        The nominal parameters.
+    x : array_like or SX
+        State of :func:`prediction_model`.
+    d : array_like or SX
+        Its disturbance: ``[torque, ...]`` (N m first).
+    refs : array_like or SX
+        Angle references (deg), one per sample.
+    gain : bool, optional
+        ``d = [torque, g, ...]`` (:func:`prediction_model` with the ``gain`` estimate): the
+        muscles' torque is divided by ``1 + g`` (g within :data:`LEARNED_ERROR_RANGE`).
+
+    Returns
+    -------
+    ndarray or SX
+        One pressure-difference command (bar) per reference.
     """
     D, M = p.delay_samples, p.hysteresis.n_elements
     w = np.asarray(p.hysteresis.w)
@@ -252,6 +388,18 @@ def rest_state(p: PamJointParams, z):
     Relaxed hysteresis, and a delay line holding the measured pressure (at rest the command is
     the pressure, so a joint started pressurised is not predicted to vent; NumPy, or CasADi
     expressions).
+
+    Parameters
+    ----------
+    p : PamJointParams
+        The nominal parameters.
+    z : array_like or SX
+        Sensor vector ``[θ, Δp]`` (deg, bar).
+
+    Returns
+    -------
+    ndarray or SX
+        The state ``[θ, 0, Δp, 0, 0..0, Δp..Δp]``.
     """
     D, M = p.delay_samples, p.hysteresis.n_elements
     if symbolic(z):
@@ -267,6 +415,18 @@ def linear_model(p: PamJointParams, substeps: int = 2) -> PredictionModel:
     q_1..q_D]`` with ``Δp_v`` the effective pressure; ``d``: an unknown torque (N m), as in
     :func:`prediction_model`. ``J θ'' = a0 Δp_v − (K + m g L) θ − c θ' + d``: a(θ), b(θ)
     and the payload linearised at 0. Sensors: angle and effective pressure.
+
+    Parameters
+    ----------
+    p : PamJointParams
+        The nominal parameters.
+    substeps : int, optional
+        RK4 steps per sample.
+
+    Returns
+    -------
+    PredictionModel
+        The linear model, sensors named ``y`` and ``pressure``.
     """
     D = p.delay_samples
     x, v, d = ca.SX.sym("x", 4 + D), ca.SX.sym("v"), ca.SX.sym("d")
@@ -291,7 +451,17 @@ def linear_model(p: PamJointParams, substeps: int = 2) -> PredictionModel:
 def static_compensation(p: PamJointParams, theta_deg: float) -> float:
     """What :func:`linear_model` leaves out of the static balance at angle θ (bar).
 
-    ``Δp_cons(θ) − Δp_cons'(0) θ``, eq. (2) minus its slope at 0.
+    Parameters
+    ----------
+    p : PamJointParams
+        The nominal parameters.
+    theta_deg : float
+        Joint angle θ (deg).
+
+    Returns
+    -------
+    float
+        ``Δp_cons(θ) − Δp_cons'(0) θ`` (bar), eq. (2) minus its slope at 0.
     """
     slope = (p.passive_stiffness + p.payload_kg * GRAVITY * p.lever_m) * DEG / p.torque_per_bar
     return float(constraint_pressure(p, theta_deg)) - slope * theta_deg
@@ -304,7 +474,18 @@ class PamJoint(ParametrisedPlant):
     params: PamJointParams = field(default_factory=PamJointParams)
 
     def reset(self, seed: int) -> Measurement:
-        """Start at rest at θ = 0 with relaxed hysteresis; seed the sensor noise."""
+        """Start at rest at θ = 0 with relaxed hysteresis; seed the sensor noise.
+
+        Parameters
+        ----------
+        seed : int
+            Seed of the pressure-sensor noise.
+
+        Returns
+        -------
+        Measurement
+            The first measurement, at rest.
+        """
         p = self.params
         self._rng = np.random.default_rng(seed)
         self._t = 0.0
@@ -317,7 +498,19 @@ class PamJoint(ParametrisedPlant):
         return _creep(self.params, t, xp)
 
     def step(self, u: float) -> Measurement:
-        """Apply the commanded pressure difference ``u`` (bar) for one sample."""
+        """Apply the commanded pressure difference ``u`` (bar) for one sample.
+
+        Parameters
+        ----------
+        u : float
+            Commanded pressure difference (bar), clipped to ±``dp_limit``; it reaches the
+            pressure loop ``delay_samples`` samples later.
+
+        Returns
+        -------
+        Measurement
+            The measurement at the end of the sample.
+        """
         if not np.isfinite(u):
             raise ValueError(f"plant input must be finite, got {u}")
         p = self.params
@@ -335,8 +528,8 @@ class PamJoint(ParametrisedPlant):
 
         The Function ``(x, hysteresis state, t, Δp_cmd) -> (x, hysteresis state)`` takes
         ``substeps`` RK4 steps, each followed by the slew limit and the exact Maxwell-slip update
-        (clips, not smoothed). Built once per plant; evaluating it is about 100 times faster than
-        the same arithmetic in NumPy scalars.
+        (clips, not smoothed). Built once per plant; evaluating it is much faster than the same
+        arithmetic in NumPy scalars.
         """
         if getattr(self, "_sample", None) is None:
             self._sample = _sample_function(self.params)
@@ -356,7 +549,22 @@ class PamJoint(ParametrisedPlant):
 
 
 def perturbed_hysteresis(base: MaxwellSlip, k_scale: float, w_scale: float) -> MaxwellSlip:
-    """Maxwell-slip model with stiffnesses and break-away levels scaled element-wise."""
+    """Maxwell-slip model with stiffnesses and break-away levels scaled element-wise.
+
+    Parameters
+    ----------
+    base : MaxwellSlip
+        The model to scale.
+    k_scale : float
+        Factor on every stiffness ``k``.
+    w_scale : float
+        Factor on every break-away level ``w``.
+
+    Returns
+    -------
+    MaxwellSlip
+        A copy of ``base`` with the scaled ``k`` and ``w``.
+    """
     return replace(base, k=tuple(k * k_scale for k in base.k), w=tuple(w * w_scale for w in base.w))
 
 

@@ -73,7 +73,22 @@ C_CORE = ReluctanceParams(area=256e-6, path_length=0.150, turns=2 * 210, p1=0.00
 
 
 def static_force(p: ReluctanceParams, i_eff, gap: float):
-    """F(i_eff, g) of the module docstring (N); ``gap`` in m."""
+    """F(i_eff, g) of the module docstring (N).
+
+    Parameters
+    ----------
+    p : ReluctanceParams
+        The actuator parameters.
+    i_eff : float or array_like
+        Effective current, the hysteresis output (A).
+    gap : float
+        Air gap (m).
+
+    Returns
+    -------
+    ndarray
+        Force (N), of the shape of ``i_eff``.
+    """
     phi_lin = MU0 * p.area * p.turns * np.asarray(i_eff, float) / (2 * gap + p.path_length / p.mu_r)
     phi_sat = p.b_sat * p.area
     phi = phi_lin / (1 + (phi_lin / phi_sat) ** 4) ** 0.25
@@ -98,14 +113,36 @@ class ReluctanceActuator(ParametrisedPlant):
         super().__post_init__()
 
     def reset(self, seed: int) -> Measurement:
-        """Demagnetised at zero current; seed the force noise."""
+        """Demagnetised at zero current; seed the force noise.
+
+        Parameters
+        ----------
+        seed : int
+            Seed of the force-measurement noise (drawn only when ``noisy``).
+
+        Returns
+        -------
+        Measurement
+            The first measurement, at rest.
+        """
         self._rng = np.random.default_rng(seed)
         self._current = 0.0
         self._hys = self.hysteresis.initial_state(0.0)
         return self._measure()
 
     def step(self, current_ref: float) -> Measurement:
-        """Apply a current reference (A) for one sample."""
+        """Apply a current reference (A) for one sample.
+
+        Parameters
+        ----------
+        current_ref : float
+            Current reference (A), clipped to ±``current_limit``.
+
+        Returns
+        -------
+        Measurement
+            The measurement at the end of the sample; the sensor is the current.
+        """
         if not np.isfinite(current_ref):
             raise ValueError(f"plant input must be finite, got {current_ref}")
         p = self.params
@@ -132,8 +169,27 @@ def major_loop_measurement(p: ReluctanceParams, gap: float, force_max: float, du
                            seed: int = 0, decimate: int = 5) -> tuple[np.ndarray, np.ndarray]:
     """Simulated identification run (Fig. 9): current 0 → i_max → 0, measured force.
 
-    ``i_max`` reaches ``force_max`` on the static map without hysteresis. Returns the
-    current and the noisy force, decimated by ``decimate``.
+    Parameters
+    ----------
+    p : ReluctanceParams
+        The true actuator.
+    gap : float
+        Air gap (m).
+    force_max : float
+        Force (N) that ``i_max`` reaches on the static map without hysteresis.
+    duration : float, optional
+        Length of the run, up and down (s).
+    seed : int, optional
+        Seed of the force noise.
+    decimate : int, optional
+        Keep every ``decimate``-th sample.
+
+    Returns
+    -------
+    current : ndarray
+        The current (A), decimated.
+    force : ndarray
+        The noisy force (N), decimated.
     """
     grid = np.linspace(0.0, p.current_limit, 20001)
     i_max = float(np.interp(force_max, static_force(p, grid, gap), grid))

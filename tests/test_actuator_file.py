@@ -62,7 +62,8 @@ def test_inverse_lmpc_is_tuned_and_the_files_table_wins(piezo, tmp_path):
     """``inverse-lmpc`` on an actuator file: the exact inverse in series with the input and a
     linear MPC on the second-order block and its dead time; its rate weight is the grid point
     with the least mean RMSE on the nominal model. A file's ``[lmpc]`` table wins."""
-    from hystmpc.experiments.actuator_file import LMPC_RATE_FACTORS, ActuatorSpec
+    from hystmpc.experiments.actuator_file import ActuatorSpec
+    from hystmpc.experiments.tuning import LMPC_RATE_FACTORS
     out = piezo / "compare"
     if not (out / "results.json").exists():
         assert main(["compare", str(piezo / "piezo.toml"), "--out", str(out), "--no-plots", "--quiet"]) == 0

@@ -84,3 +84,31 @@ def test_a_bench_scenario_refuses_a_conflicting_condition():
 def test_a_disturbance_that_enters_nowhere_is_refused():
     with pytest.raises(ValueError, match="rhs never reads d"):
         build_prediction_model(PI, 0.01, dynamics=LAG, disturbance="dynamics")
+
+
+def test_any_controller_that_reads_nmpc_settings_gets_the_runtime_and_planner_they_ask_for():
+    """Bench.build_controller has no name special case: pam's NMPC renamed ``mpc`` still takes
+    the plan of its spec's planner with ``inverse_plan=linear-mpc``, without a planner it is
+    refused, and ``runtime=c`` with a solver the generated controller lacks is refused by
+    the same check the command line runs (Bench.validate)."""
+    import dataclasses
+
+    pam = get_bench("pam")
+    spec = dataclasses.replace(pam.controllers["nmpc"], name="mpc")
+    bench = dataclasses.replace(pam, controllers={"mpc": spec, "inverse-lmpc": pam.controllers["inverse-lmpc"]})
+    planned = bench.configure(["nmpc.inverse_plan=linear-mpc"])
+    controller = bench.build_controller("mpc", planned)
+    assert type(controller.planner).__name__ == "InverseLinearMpc"
+    alone = dataclasses.replace(bench, controllers={"mpc": spec})
+    with pytest.raises(ValueError, match="takes the plan of the inverse-lmpc baseline, which bench 'pam' lacks"):
+        alone.build_controller("mpc", planned)
+    unnamed = dataclasses.replace(spec, planner="")
+    nameless = dataclasses.replace(bench, controllers={**bench.controllers, "mpc": unnamed})
+    with pytest.raises(ValueError, match="controller 'mpc' names none; set nmpc.inverse_plan=static"):
+        nameless.build_controller("mpc", planned)
+    wrong = bench.configure(["nmpc.runtime=c", "nmpc.solver=ipopt"])
+    with pytest.raises(ValueError, match="nmpc.runtime=c runs the generated controller, whose solver is the RTI step"):
+        bench.validate(wrong, ["mpc"])
+    bench.validate(wrong, ["inverse-lmpc"])  # a controller that reads no NMPC settings is not checked against them
+    with pytest.raises(ValueError, match="whose solver is the RTI step"):
+        bench.prepare("square-20", "mpc", wrong)  # a Python caller gets the same check

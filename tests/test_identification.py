@@ -237,7 +237,7 @@ def test_bad_identify_usage_exits_2(tmp_path, capsys, argv, needle):
 @pytest.mark.slow
 def test_reluctance_identification_from_a_measured_loop_file(tmp_path, capsys):
     from hystmpc.experiments.benches import get_bench
-    from hystmpc.experiments.benches.reluctance import rig
+    from hystmpc.experiments.benches.reluctance_identification import rig
     from hystmpc.plants.reluctance import major_loop_measurement
     plant, _, force_max = rig(get_bench("reluctance").configure())
     rows = []

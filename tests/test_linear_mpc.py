@@ -133,13 +133,12 @@ def test_a_plan_begins_with_the_input_step_sends_and_leaves_the_memory_as_it_was
 
 
 def test_nmpc_with_a_linear_mpc_plan_needs_the_planner():
-    from hystmpc.experiments.benches.dea import build_nmpc
     bench = get_bench("dea")
     config = bench.configure()
     assert config["nmpc"].inverse_plan == "linear-mpc"  # dea's default
     attached = bench.build_controller("nmpc", config)
     assert isinstance(attached.planner, InverseLinearMpc)
-    bare = build_nmpc(config)  # the bench's builder alone attaches nothing
+    bare = bench.controllers["nmpc"].build(config)  # the bench's builder alone attaches nothing
     bare.reset()
     measurement = bench.build_plant(config).reset(0)
     with pytest.raises(ValueError, match="nmpc.inverse_plan=linear-mpc .* set nmpc.inverse_plan=static"):

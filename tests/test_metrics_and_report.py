@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from hystmpc.experiments.benches.pam import BENCH
-from hystmpc.experiments.config import allowed_keys, apply_overrides
+from hystmpc.experiments.config import allowed_keys, apply_overrides, apply_values
 from hystmpc.experiments.metrics import (
     OSCILLATING_CYCLES,
     input_metrics,
@@ -99,6 +99,39 @@ def test_overrides_nested_and_typed():
 def test_bad_overrides(assignment, match):
     with pytest.raises(ValueError, match=match):
         apply_overrides(BENCH.configure(), [assignment])
+
+
+def test_typed_values_take_the_same_route_as_texts():
+    """A dict of typed values (a file's tables, a Python caller) sets what the same texts set,
+    follows the same leaders (lmpc.horizon), and is refused where its type is not the field's."""
+    texts = BENCH.configure(["plant.hysteresis.k=0.05,0.02,0.003,0.003", "nmpc.preview=false",
+                             "model.payload_kg=1.5", "nmpc.horizon=25", "solver.ipopt.options.print_level=0"])
+    typed = BENCH.configure({"plant.hysteresis.k": [0.05, 0.02, 0.003, 0.003], "nmpc.preview": False,
+                             "model.payload_kg": 1.5, "nmpc.horizon": 25, "solver.ipopt.options.print_level": 0})
+    assert typed == texts and typed["lmpc"].horizon == 25
+    assert apply_values(BENCH.configure(), {"model.payload_kg": 2})["model"].payload_kg == 2.0  # an integer is a number
+    numpy = BENCH.configure({"nmpc.horizon": np.int64(25), "nmpc.preview": np.bool_(False),
+                             "model.payload_kg": np.float32(1.5)})
+    assert numpy == BENCH.configure({"nmpc.horizon": 25, "nmpc.preview": False, "model.payload_kg": 1.5})
+    assert BENCH.configure({"solver.ipopt.options.max_cpu_time": "5"})["solver"].ipopt.options["max_cpu_time"] == 5
+
+
+@pytest.mark.parametrize("values, match", [
+    ({"nmpc.horizon": "25"}, r"nmpc.horizon = '25': expected an integer \(the default is 20\)"),
+    ({"nmpc.horizon": 25.0}, "nmpc.horizon = 25.0: expected an integer"),
+    ({"nmpc.preview": 1}, "nmpc.preview = 1: expected true or false"),
+    ({"model.payload_kg": True}, "model.payload_kg = True: expected a finite number"),
+    ({"plant.hysteresis.k": [0.05, "x"]}, "expected 4 comma-separated numbers"),
+    ({"nmpc.horizon": 1}, "nmpc.horizon = 1: horizon must be >= 2"),
+    ({"nmpc.horizn": 3}, "unknown table key 'nmpc.horizn'; did you mean 'nmpc.horizon'"),
+    ({"nmpc.q_output": 10**400}, "nmpc.q_output = 1000.*: expected a finite number"),
+    ({"plant.hysteresis.k": [[0.05, 0.02], 0.003, 0.003]}, "expected 4 comma-separated numbers"),
+    ({"solver.ipopt.options.when": __import__("datetime").date(1979, 5, 27)},
+     "solver.ipopt.options.when = datetime.date.*: expected true or false, a number or text"),
+])
+def test_bad_typed_values(values, match):
+    with pytest.raises(ValueError, match=match):
+        apply_values(BENCH.configure(), values)
 
 
 def _doc():

@@ -316,12 +316,12 @@ def test_runtime_auto_runs_the_generated_controller_where_it_can(tmp_path, monke
     """``nmpc.runtime=auto`` (reluctance's default): the generated controller with an RTI
     solver and a C compiler; the Python controller with another solver, and without a
     compiler after a notice, where ``runtime=c`` is refused."""
-    from hystmpc.experiments import firmware
+    from hystmpc.mpc import runtime
     from hystmpc.mpc.codegen import c_compiler
     if c_compiler() is None:
         pytest.skip("no C compiler")
     monkeypatch.setenv("HYSTMPC_CACHE", str(tmp_path))
-    monkeypatch.setattr(firmware, "_SAID", set())  # each notice is said once per process
+    monkeypatch.setattr(runtime, "_SAID", set())  # each notice is said once per process
     bench = get_bench("reluctance")
     assert bench.configure()["nmpc"].runtime == "auto"
     assert type(bench.build_controller("nmpc", bench.configure())).__name__ == "CompiledController"
@@ -341,7 +341,7 @@ def test_runtime_auto_runs_the_generated_controller_where_it_can(tmp_path, monke
                                                                    "nmpc.inverse_plan=static"]))
     assert type(whole_memory).__name__ == "NmpcController" and whole_memory.settings.solver == "rti-c"
     assert "nmpc.runtime=auto runs the controller in Python" in caplog.text
-    firmware._SAID.clear()  # said once per process
+    runtime._SAID.clear()  # said once per process
     with caplog.at_level("WARNING", logger="hystmpc"):  # dea's default second start: a linear MPC, in Python
         planned = dea.build_controller("nmpc", dea.configure(["nmpc.runtime=auto", "nmpc.solver=rti-c",
                                                               "memory.window=50"]))

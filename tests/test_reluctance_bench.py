@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from hystmpc.experiments.baselines import Replay
-from hystmpc.experiments.benches.reluctance import BENCH, identified_model, rig
+from hystmpc.experiments.benches.reluctance import BENCH
+from hystmpc.experiments.benches.reluctance_identification import identified_model, rig
 from hystmpc.experiments.cli import main
 from hystmpc.experiments.config import apply_overrides
 from hystmpc.experiments.runner import reference_samples, simulate

@@ -28,6 +28,7 @@ from hystmpc.experiments.baselines.compensation import (
 )
 from hystmpc.experiments.baselines.pid import (
     Feedforward,
+    FeedforwardPidGains,
     InverseFeedforward,
     Pid,
     PidController,
@@ -38,5 +39,5 @@ from hystmpc.experiments.baselines.reluctance_inverses import HystInverse, PolyI
 from hystmpc.experiments.baselines.replay import Replay
 
 __all__ = ["AdditiveCompensation", "Feedforward", "HystInverse", "HysteresisCompensation", "InverseCompensation",
-           "InverseFeedforward", "Pid", "PidController", "PidGains", "PolyInverse", "Replay",
+           "FeedforwardPidGains", "InverseFeedforward", "Pid", "PidController", "PidGains", "PolyInverse", "Replay",
            "inverse_feedforward_pid"]

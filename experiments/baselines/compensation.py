@@ -20,7 +20,13 @@ from hystmpc.mpc.codegen.toolchain import LOG, compiled_or_slower
 
 
 class HysteresisCompensation:
-    """The hysteresis model's output along the *measured* output, added to the command (vo2012 Fig. 1)."""
+    """The hysteresis model's output along the *measured* output, added to the command (vo2012 Fig. 1).
+
+    Parameters
+    ----------
+    hysteresis : HysteresisModel
+        The model, driven by the measured output ``measurement.y`` from the first sample on.
+    """
 
     def __init__(self, hysteresis: HysteresisModel):
         self.hysteresis = hysteresis
@@ -63,26 +69,82 @@ class AdditiveCompensation:
         self.offset = 0.0
 
     def update(self, measurement) -> None:
-        """Take this sample's offset."""
+        """Take this sample's offset.
+
+        Parameters
+        ----------
+        measurement : Measurement
+            This sample's measurement.
+        """
         self.offset = float(self._offset(measurement))
 
     def to_input(self, v: float) -> float:
-        """``v + c``."""
+        """``v + c``.
+
+        Parameters
+        ----------
+        v : float
+            A virtual input.
+
+        Returns
+        -------
+        float
+            The actuator input.
+        """
         return v + self.offset
 
     def to_virtual(self, u: float) -> float:
-        """``u − c``."""
+        """``u − c``.
+
+        Parameters
+        ----------
+        u : float
+            An actuator input.
+
+        Returns
+        -------
+        float
+            The virtual input.
+        """
         return u - self.offset
 
     def applied(self, u: float) -> None:
-        """Nothing: the offset follows the measurement."""
+        """Nothing: the offset follows the measurement.
+
+        Parameters
+        ----------
+        u : float
+            The input sent (unused).
+        """
 
     def inputs_along(self, vs) -> np.ndarray:
-        """``v + c`` for each virtual input."""
+        """``v + c`` for each virtual input.
+
+        Parameters
+        ----------
+        vs : array_like
+            Virtual inputs.
+
+        Returns
+        -------
+        ndarray
+            The actuator inputs.
+        """
         return np.asarray(vs, float) + self.offset
 
     def sensors(self, measurement) -> np.ndarray:
-        """The linear model's sensors."""
+        """The linear model's sensors.
+
+        Parameters
+        ----------
+        measurement : Measurement
+            This sample's measurement.
+
+        Returns
+        -------
+        ndarray
+            ``sensors(measurement, c)``.
+        """
         return np.asarray(self._sensors(measurement, self.offset), float)
 
 
@@ -136,7 +198,15 @@ class InverseCompensation:
         return float(self.hysteresis.output(self._state))
 
     def update(self, measurement) -> None:
-        """Move the memory along the measured hysteresis input (when it follows one)."""
+        """Move the memory along the measured hysteresis input (when it follows one).
+
+        When it follows the inputs sent, the first call sets the memory at rest.
+
+        Parameters
+        ----------
+        measurement : Measurement
+            This sample's measurement.
+        """
         if self._driven_by is not None:
             s = float(self._driven_by(measurement))
             self._state = (self.hysteresis.initial_state(s) if self._state is None
@@ -146,7 +216,18 @@ class InverseCompensation:
                            else self.hysteresis.initial_state(self._rest_input))
 
     def to_input(self, v: float) -> float:
-        """The input that gives the virtual input ``v`` from the present memory."""
+        """The input that gives the virtual input ``v`` from the present memory.
+
+        Parameters
+        ----------
+        v : float
+            A virtual input.
+
+        Returns
+        -------
+        float
+            The actuator input; NaN when ``v`` is beyond the model's reach.
+        """
         try:
             target = float(self._hysteresis_output_of(v))
             return float(self._input_of(self.hysteresis.inverse_step(self._state, target)[1]))
@@ -154,23 +235,49 @@ class InverseCompensation:
             return np.nan
 
     def to_virtual(self, u: float) -> float:
-        """The virtual input the input ``u`` gives from the present memory."""
+        """The virtual input the input ``u`` gives from the present memory.
+
+        Parameters
+        ----------
+        u : float
+            An actuator input.
+
+        Returns
+        -------
+        float
+            The virtual input (the memory is left as it is).
+        """
         return float(self._virtual_of(self.hysteresis.step(self._state, float(self._hysteresis_input_of(u)))[1]))
 
     def applied(self, u: float) -> None:
-        """Move the memory with the applied input (when it follows the inputs)."""
+        """Move the memory with the applied input (when it follows the inputs).
+
+        Parameters
+        ----------
+        u : float
+            The input sent.
+        """
         if self._driven_by is None:
             self._state = self.hysteresis.step(self._state, float(self._hysteresis_input_of(u)))[0]
 
     def inputs_along(self, vs) -> np.ndarray:
         """The inputs that give the virtual inputs ``vs`` one after another.
 
-        The memory moves along them from its present state (which is left as it is); NaN where one
-        is out of reach, the memory then held.
+        The memory moves along them from its present state (which is left as it is).
 
         Where the model's inverse takes CasADi expressions (hystmpc's own models: by bisection,
-        to about 1e-12 of the search :meth:`to_input` runs) the chain is one compiled Function,
-        about 50 times faster on dea than the search repeated in Python.
+        close to the search :meth:`to_input` runs) the chain is one compiled Function, faster
+        than the search repeated in Python.
+
+        Parameters
+        ----------
+        vs : array_like
+            Virtual inputs, in order.
+
+        Returns
+        -------
+        ndarray
+            The actuator inputs; NaN where one is out of reach, the memory then held.
         """
         vs = np.asarray(vs, float).ravel()
         fun = self._chain(len(vs))
@@ -186,11 +293,28 @@ class InverseCompensation:
         return np.array(inputs)
 
     def sensors(self, measurement) -> np.ndarray:
-        """The linear model's sensors."""
+        """The linear model's sensors.
+
+        Parameters
+        ----------
+        measurement : Measurement
+            This sample's measurement.
+
+        Returns
+        -------
+        ndarray
+            ``sensors(measurement, self)``.
+        """
         return np.asarray(self._sensors(measurement, self), float)
 
     def prepare_chain(self, n: int) -> None:
-        """Build (and compile) :meth:`inputs_along` for ``n`` virtual inputs now, not at the first sample."""
+        """Build (and compile) :meth:`inputs_along` for ``n`` virtual inputs now, not at the first sample.
+
+        Parameters
+        ----------
+        n : int
+            Length of the plans (the horizon).
+        """
         self._chain(n)
 
     def _chain(self, n: int) -> ca.Function | None:

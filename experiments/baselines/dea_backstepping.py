@@ -18,7 +18,7 @@ class BicSettings:
     """Backstepping implicit-inverse adaptive control, Section 5.2 (``--set bic.KEY=VALUE``)."""
 
     k1: float = 20.0
-    """Outer-loop gain (1/s). The paper's 3.5 gives 0.033 mm on ``single-sine`` here; 20 is
+    """Outer-loop gain (1/s). The paper's 3.5 tracks ``single-sine`` worse here; 20 is
     the middle of the stable region of a scan over k1, λ and the velocity filter (docs/dea.md)."""
     k2: float = 3.5
     """Inner-loop gain, applied as λ·k2 (see :class:`Backstepping`)."""
@@ -52,7 +52,13 @@ class BicSettings:
 
 
 class ReferenceDerivatives:
-    """ẋd and ẍd from the sampled reference by central differences (one sample of preview)."""
+    """ẋd and ẍd from the sampled reference by central differences (one sample of preview).
+
+    Parameters
+    ----------
+    dt : float
+        Sample period (s).
+    """
 
     def __init__(self, dt: float):
         self.dt = dt
@@ -71,7 +77,15 @@ class ReferenceDerivatives:
 
 
 class VelocityFilter:
-    """x2 from the laser displacement: differenced, then a first-order low-pass."""
+    """x2 from the laser displacement: differenced, then a first-order low-pass.
+
+    Parameters
+    ----------
+    dt : float
+        Sample period (s).
+    tau : float
+        Time constant of the low-pass (s); 0: none.
+    """
 
     def __init__(self, dt: float, tau: float):
         self.dt, self.alpha = dt, dt / (tau + dt) if tau > 0 else 1.0
@@ -101,7 +115,7 @@ class Backstepping:
     * λ (``unit_scale``) scales k2, Γ11 and Γ12. Literally, ``− k2 e2`` makes e2 decay at
       g·k2 ≈ 5000 /s, which a 100 Hz loop cannot realise: the input chatters 0 ↔ 10 V.
     * δ̂ ≈ g⁻¹ adapts 1/ω² slower still and is projected onto [0, 2/ω²]; unscaled it grew
-      to 1e4 times g⁻¹.
+      far beyond g⁻¹.
     * The RBFs see x1 mapped from [0, 4] mm onto the centres' [−1, 1].
     * x2 is the differenced laser signal through a first-order low-pass (``velocity_filter``).
     * k1 = 20 instead of 3.5 (see :class:`BicSettings`). θ̂ and δ̂ start from zero, as printed.
@@ -112,6 +126,17 @@ class Backstepping:
     adaptive density μ̂ (eq. (26)): ``μ̂' = γμ (e2 κ_ρ − r2 (μ̂ − μ̂0))``, μ̂ ≥ 0, where μ̂0 is
     the nominal density (a leak towards zero, as printed, would empty the model the inverse
     searches).
+
+    Parameters
+    ----------
+    settings : BicSettings
+        Gains, adaptation rates and the decisions above.
+    model : DeaParams
+        The nominal model (its FCKP, sample period and natural frequency).
+    creep_window : int or None
+        Memory window of the creep inverse (past samples); None: the full memory.
+    compensate : bool
+        ``bic`` (True) or ``backstepping`` (False).
     """
 
     horizon = 1
@@ -145,7 +170,20 @@ class Backstepping:
         return np.exp(-(((x1 - 2.0) / 2.0 - self.centres) ** 2) / 2.0)
 
     def step(self, measurement, ref_window) -> float:
-        """Voltage for this sample."""
+        """Voltage for this sample.
+
+        Parameters
+        ----------
+        measurement : Measurement
+            This sample's measurement (its displacement ``y``, mm).
+        ref_window : ndarray
+            The references from this sample on (mm); the first two are used.
+
+        Returns
+        -------
+        float
+            The voltage (V), within ``[0, u_max]``.
+        """
         s, dt = self.s, self.dt
         x1 = measurement.y
         x2 = self._velocity(x1)

@@ -37,6 +37,13 @@ class DeaLinearMpc:
     the laser: hysteresis, creep and mismatch all land in ``d``, which makes the tracking
     offset-free. The QP is condensed over the control moves Δu_0..Δu_{Nc−1}; the input is
     held after the control horizon; the reference over the prediction horizon is previewed.
+
+    Parameters
+    ----------
+    settings : DeaLinearMpcSettings
+        Horizons and weights.
+    model : DeaParams
+        The nominal model (its mechanics, FCKP, sample period and sensor noise).
     """
 
     def __init__(self, settings: DeaLinearMpcSettings, model: DeaParams):
@@ -105,7 +112,20 @@ class DeaLinearMpc:
         return self.a * u + self.b - self._w_offset
 
     def step(self, measurement, ref_window) -> float:
-        """Voltage for this sample."""
+        """Voltage for this sample.
+
+        Parameters
+        ----------
+        measurement : Measurement
+            This sample's measurement (its displacement ``y``, mm).
+        ref_window : ndarray
+            The references ``r_k..r_{k+Np}`` (mm).
+
+        Returns
+        -------
+        float
+            The voltage (V), within ``[0, u_max]``; the last one held when OSQP fails.
+        """
         if self._started:  # time update with the applied input
             self.x = self.A @ self.x + (self.B * self._affine(self._u)).ravel()
             self.P = self.A @ self.P @ self.A.T + self._Q
@@ -131,5 +151,11 @@ class DeaLinearMpc:
         return u
 
     def stats(self) -> dict:
-        """OSQP failures (input held)."""
+        """OSQP failures (input held).
+
+        Returns
+        -------
+        dict
+            ``name`` (``osqp``), ``failures`` and ``fallbacks`` (the same count).
+        """
         return {"name": "osqp", "failures": self.failures, "fallbacks": self.failures}

@@ -43,6 +43,17 @@ class Pid:
     ``u = clip(ff + kp e + I + kd ė_f, lo, hi)``, and within ``rate`` of the last output; the
     integral only accumulates while that does not push a saturated output further into
     saturation.
+
+    Parameters
+    ----------
+    gains : PidGains
+        The gains.
+    dt : float
+        Sample period (s).
+    limits : tuple of float
+        ``(lo, hi)``: the output's bounds.
+    rate : float, optional
+        Largest output change per sample (default: none).
     """
 
     def __init__(self, gains: PidGains, dt: float, limits: tuple[float, float], rate: float = np.inf):
@@ -60,7 +71,20 @@ class Pid:
         self._last_output = None
 
     def update(self, error: float, feedforward: float = 0.0) -> float:
-        """Output for this sample's error."""
+        """Output for this sample's error.
+
+        Parameters
+        ----------
+        error : float
+            The tracking error ``e``.
+        feedforward : float, optional
+            The feed-forward term ``ff``.
+
+        Returns
+        -------
+        float
+            ``u``, within the bounds and the rate.
+        """
         g = self.gains
         if self._last_error is not None and g.kd > 0:
             raw = (error - self._last_error) / self.dt
@@ -102,7 +126,7 @@ class PidController:
         The input's bounds; the output is clipped there (with anti-windup).
     feedforward : Feedforward, optional
         Added to the PID output before the clip.
-    rate : float
+    rate : float, optional
         Largest input change per sample (default: none).
     """
 
@@ -122,7 +146,20 @@ class PidController:
         self.predicted_output = float("nan")
 
     def step(self, measurement, ref_window) -> float:
-        """Input for this sample."""
+        """Input for this sample.
+
+        Parameters
+        ----------
+        measurement : Measurement
+            This sample's measurement (its output ``y``).
+        ref_window : ndarray
+            The references from this sample on (``horizon + 1`` samples).
+
+        Returns
+        -------
+        float
+            The input to send.
+        """
         ff = 0.0 if self.feedforward is None else self.feedforward(measurement, ref_window)
         return self.pid.update(float(ref_window[0]) - measurement.y, ff)
 
@@ -145,7 +182,7 @@ class InverseFeedforward:
         The nominal hysteresis model.
     steady_input, input_of : callable, optional
         See above.
-    preview : int
+    preview : int, optional
         Target the reference this many samples ahead (a known dead time).
     """
 
@@ -181,11 +218,44 @@ def inverse_feedforward_pid(hysteresis: HysteresisModel, gains: PidGains, sample
                             ) -> PidController:
     """Inverse feed-forward + PID (the usual scheme for an actuator with hysteresis).
 
-    See :class:`InverseFeedforward` for ``steady_input``, ``input_of`` and ``preview``; the
-    controller asks for ``preview`` samples of reference preview.
+    Parameters
+    ----------
+    hysteresis : HysteresisModel
+        The nominal hysteresis model.
+    gains : PidGains
+        The PID's gains.
+    sample_period : float
+        Sample period (s).
+    limits : tuple of float
+        The input's bounds.
+    steady_input, input_of : callable, optional
+        As in :class:`InverseFeedforward`.
+    preview : int, optional
+        As in :class:`InverseFeedforward`; the controller asks for ``preview`` samples of
+        reference preview (its ``horizon``).
+    rate : float, optional
+        Largest input change per sample (default: none).
+
+    Returns
+    -------
+    PidController
+        The PID with the inverse feed-forward.
     """
     controller = PidController(gains, sample_period, limits,
                                InverseFeedforward(hysteresis, steady_input, input_of, preview), rate)
     controller.horizon = preview
     return controller
 
+
+@dataclass(frozen=True)
+class FeedforwardPidGains(PidGains):
+    """PID gains and the feed-forward's reference preview (``--set inverse_ff_pid.*``)."""
+
+    preview: int = 0
+    """Samples by which the inverse feed-forward leads the reference (it covers the dead time,
+    the sampling's one sample and the block's lag)."""
+
+    def __post_init__(self):
+        super().__post_init__()
+        if not (isinstance(self.preview, int) and 0 <= self.preview <= 1000):
+            raise ValueError(f"preview must be an integer in [0, 1000], got {self.preview}")

@@ -17,6 +17,15 @@ class PolyInverse:
 
     Like every feed-forward here it commands the force wanted when the current takes
     effect, one sample ahead (``horizon = 1``); otherwise it would lag by one sample.
+
+    Parameters
+    ----------
+    model : ReluctanceModel
+        The identified model (its polynomial inverse).
+    gap : float
+        The air gap (m).
+    current_limit : float
+        Largest current (A).
     """
 
     horizon = 1
@@ -29,7 +38,20 @@ class PolyInverse:
         """Stateless."""
 
     def step(self, measurement, ref_window) -> float:
-        """Current for the reference force."""
+        """Current for the reference force.
+
+        Parameters
+        ----------
+        measurement : Measurement
+            This sample's measurement (unused: feed-forward).
+        ref_window : ndarray
+            The force references (N); ``ref_window[1]`` is the one targeted.
+
+        Returns
+        -------
+        float
+            The current (A), within ``[0, current_limit]``.
+        """
         return float(np.clip(self.model.poly_current(float(ref_window[1]), self.gap)[0], 0.0, self.limit))
 
     def stats(self) -> None:
@@ -43,6 +65,17 @@ class HystInverse:
     The command is rate-limited to the slew limit and the operator's memory follows the current
     actually commanded. Targets the next sample's reference (``horizon = 1``), as
     :class:`PolyInverse`.
+
+    Parameters
+    ----------
+    model : ReluctanceModel
+        The identified model (its operator and look-up tables).
+    gap : float
+        The air gap (m).
+    current_limit : float
+        Largest current (A).
+    slew_per_sample : float
+        Largest current change per sample (A).
     """
 
     horizon = 1
@@ -58,7 +91,20 @@ class HystInverse:
         self.predicted_output = float("nan")
 
     def step(self, measurement, ref_window) -> float:
-        """Current for the reference force."""
+        """Current for the reference force.
+
+        Parameters
+        ----------
+        measurement : Measurement
+            This sample's measurement (unused: feed-forward).
+        ref_window : ndarray
+            The force references (N); ``ref_window[1]`` is the one targeted.
+
+        Returns
+        -------
+        float
+            The current (A), within ``[0, current_limit]`` and within ``slew_per_sample`` of the last.
+        """
         x_target = float(self.model.x_of_force(max(float(ref_window[1]), 0.0), self.gap))
         last = float(self._state[0])
         _, wanted = self.op.inverse_step(self._state, x_target)

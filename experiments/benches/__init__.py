@@ -43,12 +43,24 @@ DEFAULT_BENCH = "pam"
 
 
 def plugin_names() -> tuple[str, ...]:
-    """Names of the benches other installed packages register (``hystmpc.benches`` entry points)."""
+    """Names of the benches other installed packages register (``hystmpc.benches`` entry points).
+
+    Returns
+    -------
+    tuple of str
+        The names, sorted, without the built-in ones.
+    """
     return tuple(sorted({ep.name for ep in entry_points(group=ENTRY_POINT_GROUP)} - set(BENCH_NAMES)))
 
 
 def all_bench_names() -> tuple[str, ...]:
-    """Built-in benches, then plugins."""
+    """Built-in benches, then plugins.
+
+    Returns
+    -------
+    tuple of str
+        :data:`BENCH_NAMES`, then :func:`plugin_names`.
+    """
     return BENCH_NAMES + plugin_names()
 
 
@@ -65,14 +77,33 @@ def _plugin(name: str) -> Bench:
 
 
 def is_actuator_file(name: str) -> bool:
-    """Whether ``name`` names an actuator file rather than a bench."""
+    """Whether ``name`` names an actuator file rather than a bench.
+
+    Parameters
+    ----------
+    name : str
+        A bench name or a path.
+
+    Returns
+    -------
+    bool
+        True for a name ending in ``.toml``, or a path with ``/`` that exists.
+    """
     return name.endswith(".toml") or ("/" in name and Path(name).exists())
 
 
 def get_bench(name: str) -> Bench:
     """The bench called ``name`` (or in the actuator file ``name``).
 
-    ``ValueError`` naming the allowed ones otherwise.
+    Parameters
+    ----------
+    name : str
+        A built-in bench, a plugin's name or an actuator file's path.
+
+    Returns
+    -------
+    Bench
+        The bench (``ValueError`` naming the allowed ones otherwise).
     """
     if name in _FACTORIES:
         return _FACTORIES[name]()

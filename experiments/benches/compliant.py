@@ -61,7 +61,7 @@ PAPER_TABLE_IV = {0.5: (0.019, 0.053), 1.0: (0.025, 0.076), 2.0: (0.039, 0.133)}
 """zhou2024 Table IV, proposed inverse model + PID: RMSE and max error (N m)."""
 
 
-def build_pid(config: dict, feedforward: bool) -> PidController:
+def _build_pid(config: dict, feedforward: bool) -> PidController:
     """Torque PID on the motor angle, optionally with the inverse model as feed-forward (Fig. 14)."""
     model: CompliantParams = config["model"]
     limits = (-model.angle_limit, model.angle_limit)
@@ -71,7 +71,7 @@ def build_pid(config: dict, feedforward: bool) -> PidController:
     return PidController(config["pid"], model.sample_period, limits)
 
 
-def build_nmpc(config: dict) -> NmpcController:
+def _build_nmpc(config: dict) -> NmpcController:
     """The ``nmpc`` controller: EKF on [motor angle, torque] sensors, NLP, inverse warm start."""
     model: CompliantParams = config["model"]
     smoothing: Smoothing = config["smoothing"]
@@ -88,7 +88,7 @@ def build_nmpc(config: dict) -> NmpcController:
                           inverse=lambda est, refs: inverse_inputs(model, est.x, est.d, refs), jump_threshold=0.2)
 
 
-def build_inverse_lmpc(config: dict) -> InverseLinearMpc:
+def _build_inverse_lmpc(config: dict) -> InverseLinearMpc:
     """``inverse-lmpc``: the inverse power-function model and a linear MPC on the servo.
 
     The inverse power-function model is in series with the motor command (its memory follows the
@@ -121,10 +121,8 @@ def _defaults() -> dict:
     warm = NlpSettings(warm_multipliers=True)
     return {"plant": PLANT, "model": NOMINAL, "pid": PidGains(kp=0.0, ki=2.0, kd=0.005),
             "nmpc": NmpcSettings(horizon=10, q_output=1e4, r_rate=10.0), "smoothing": Smoothing(eps=2e-4),
-            # rti-c with 4 Gauss-Newton steps per sample (1 step: +12 % on sine-0.5). sine-2 is
-            # chaotic under last-bit changes: over 12 noise seeds NMPC/inverse-lmpc is 0.72-0.88
-            # with 3 steps (2 seeds above 0.8), 0.70-0.78 with 4 (docs/compliant.md). The
-            # interior-point QP: DAQP gave 0.71-0.84 (docs/realtime.md)
+            # rti-c with 4 Gauss-Newton steps per sample, and the interior-point QP: why, with the
+            # figures over 12 noise seeds, in docs/compliant.md
             "solver": SolverSettings(ipopt=warm, sqp=warm, rti=RtiSettings(iterations=4, qp="ipm")),
             "lmpc": LinearMpcSettings(horizon=10, q_output=1e4, r_rate=30.0)}
 
@@ -141,13 +139,13 @@ BENCH = Bench(
     scenarios={s.name: s for s in (_sine(0.5), _sine(1.0), _sine(2.0))},
     controllers={
         "pid": ControllerSpec("pid", "torque PID on the motor angle",
-                              lambda c: build_pid(c, feedforward=False), ("model", "pid")),
+                              lambda c: _build_pid(c, feedforward=False), ("model", "pid")),
         "inverse-ff-pid": ControllerSpec("inverse-ff-pid", "inverse power-function model + PID (Fig. 14)",
-                                         lambda c: build_pid(c, feedforward=True), ("model", "pid")),
+                                         lambda c: _build_pid(c, feedforward=True), ("model", "pid")),
         "inverse-lmpc": ControllerSpec("inverse-lmpc", "inverse power-function model + linear MPC (OSQP)",
-                                       build_inverse_lmpc, ("model", "lmpc")),
+                                       _build_inverse_lmpc, ("model", "lmpc")),
         "nmpc": ControllerSpec("nmpc", "torque NMPC, smoothed power-function model, inverse warm start",
-                               build_nmpc, ("model", "nmpc", "smoothing", "solver")),
+                               _build_nmpc, ("model", "nmpc", "smoothing", "solver"), planner="inverse-lmpc"),
     },
     defaults=_defaults,
     make_plant=lambda c: CompliantActuator(c["plant"]),

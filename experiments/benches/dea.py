@@ -124,7 +124,7 @@ class EstimatorNoise:
                              "estimated)")
 
 
-def build_nmpc(config: dict) -> NmpcController:
+def _build_nmpc(config: dict) -> NmpcController:
     """NMPC with the FCKP model, an EKF and single shooting.
 
     The controller's own exact FCKP (creep memory with window L) gives W for the estimator and
@@ -149,7 +149,7 @@ def build_nmpc(config: dict) -> NmpcController:
     return NmpcController(pm, InputBounds(0.0, model.fckp.u_max), config["nmpc"], config["solver"], observer=observer)
 
 
-def build_inverse_lmpc(config: dict) -> InverseLinearMpc:
+def _build_inverse_lmpc(config: dict) -> InverseLinearMpc:
     """``inverse-lmpc``: inverse FCKP in series with the voltage, linear MPC on the mechanics."""
     model: DeaParams = config["model"]
     compensation = InverseCompensation(Fckp(model.fckp), sensors=lambda m, comp: [m.y])
@@ -213,10 +213,11 @@ def _controllers() -> dict[str, ControllerSpec]:
                               backstepping(True), ("model", "bic", "memory")),
         "linear-mpc": ControllerSpec("linear-mpc", "linear MPC (OSQP), Np 15, Nc 5, Section 5.2 weights",
                                      lambda c: DeaLinearMpc(c["linear_mpc"], c["model"]), ("model", "linear_mpc")),
-        "inverse-lmpc": ControllerSpec("inverse-lmpc", "inverse FCKP model + linear MPC (OSQP)", build_inverse_lmpc,
+        "inverse-lmpc": ControllerSpec("inverse-lmpc", "inverse FCKP model + linear MPC (OSQP)", _build_inverse_lmpc,
                                        ("model", "lmpc")),
-        "nmpc": ControllerSpec("nmpc", "NMPC on the smooth FCKP model, GL history as parameters", build_nmpc,
-                               ("model", "memory", "estimator", "nmpc", "smoothing", "solver", "lmpc")),
+        "nmpc": ControllerSpec("nmpc", "NMPC on the smooth FCKP model, GL history as parameters", _build_nmpc,
+                               ("model", "memory", "estimator", "nmpc", "smoothing", "solver", "lmpc"),
+                               planner="inverse-lmpc"),
     }
 
 

@@ -112,7 +112,7 @@ class EstimatorNoise(DisturbanceNoise):
                              f"{', '.join(ESTIMATES)} are all 0 (nothing is learned)")
 
 
-def build_pi(config: dict, compensate: bool) -> PidController:
+def _build_pi(config: dict, compensate: bool) -> PidController:
     """vo2012 Fig. 1: PI on the angle error, optionally plus Δp_hys from the MS model.
 
     The gains (group ``pi``) are the same with and without compensation, as in the paper.
@@ -122,7 +122,7 @@ def build_pi(config: dict, compensate: bool) -> PidController:
                          HysteresisCompensation(model.hysteresis) if compensate else None)
 
 
-def build_nmpc(config: dict) -> NmpcController:
+def _build_nmpc(config: dict) -> NmpcController:
     """The ``nmpc`` controller: EKF on [θ, Δp] sensors, NLP, inverse warm start."""
     model: PamJointParams = config["model"]
     smoothing: Smoothing = config["smoothing"]
@@ -143,7 +143,7 @@ def build_nmpc(config: dict) -> NmpcController:
                           jump_threshold=1.0)
 
 
-def build_inverse_lmpc(config: dict) -> InverseLinearMpc:
+def _build_inverse_lmpc(config: dict) -> InverseLinearMpc:
     """``inverse-lmpc``: a compensation from the measured angle and a linear MPC on the joint.
 
     The compensation is the Maxwell-slip compensation of ``pi-hc`` plus the static balance
@@ -208,13 +208,13 @@ BENCH = Bench(
     scenarios={s.name: s for s in [_square(a) for a in (10, 20, 30, 40)] + [_sine(30)]},
     controllers={
         "pi": ControllerSpec("pi", "PI on the angle error, no compensation",
-                             lambda c: build_pi(c, compensate=False), ("model", "pi")),
+                             lambda c: _build_pi(c, compensate=False), ("model", "pi")),
         "pi-hc": ControllerSpec("pi-hc", "PI + Maxwell-slip hysteresis compensation (Fig. 1)",
-                                lambda c: build_pi(c, compensate=True), ("model", "pi")),
+                                lambda c: _build_pi(c, compensate=True), ("model", "pi")),
         "inverse-lmpc": ControllerSpec("inverse-lmpc", "Maxwell-slip and static compensation + linear MPC (OSQP)",
-                                       build_inverse_lmpc, ("model", "lmpc", "lmpc_estimator")),
+                                       _build_inverse_lmpc, ("model", "lmpc", "lmpc_estimator")),
         "nmpc": ControllerSpec("nmpc", "offset-free NMPC, smoothed Maxwell-slip model, inverse warm start",
-                               build_nmpc, NMPC_GROUPS),
+                               _build_nmpc, NMPC_GROUPS, planner="inverse-lmpc"),
     },
     defaults=_defaults,
     make_plant=lambda c: PamJoint(c["plant"]),

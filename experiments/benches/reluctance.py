@@ -26,57 +26,19 @@ import numpy as np
 
 from hystmpc.experiments.baselines import HystInverse, InverseCompensation, PolyInverse
 from hystmpc.experiments.bench import MULTIPLE_SHOOTING, Bench, ControllerSpec
+from hystmpc.experiments.benches.reluctance_identification import (
+    IdentificationSettings,
+    RigSettings,
+    identified_model,
+    rig,
+)
 from hystmpc.experiments.runner import Scenario
 from hystmpc.experiments.signals import smooth_path, staircase
 from hystmpc.models.prediction import Smoothing
-from hystmpc.models.reluctance import ReluctanceModel, fit_reluctance_model, prediction_model
+from hystmpc.models.reluctance import prediction_model
 from hystmpc.mpc import InputBounds, NmpcController, NmpcSettings, RtiSettings, SolverSettings
 from hystmpc.mpc.linear_mpc import InverseLinearMpc, LinearMpcSettings, one_sample_delay
-from hystmpc.plants.reluctance import C_CORE, ReluctanceActuator, ReluctanceParams, major_loop_measurement
-
-CORES = ("E", "C")
-FORCE_MAX = {"E": 400.0, "C": 240.0}
-"""Identification and ramp force ranges (N), Section 3.5."""
-
-
-@dataclass(frozen=True)
-class RigSettings:
-    """Which actuator and air gap (fixed by each named scenario)."""
-
-    core: str = "E"
-    """``E`` or ``C`` (Table 1)."""
-    gap_mm: float = 1.5
-    """Air gap (mm)."""
-
-    def __post_init__(self):
-        if self.core not in CORES:
-            raise ValueError(f"core {self.core!r} is unknown; allowed: {', '.join(CORES)}")
-        if not 1.0 <= self.gap_mm <= 2.0:
-            raise ValueError(f"gap_mm must be in [1.0, 2.0], got {self.gap_mm}")
-
-
-@dataclass(frozen=True)
-class IdentificationSettings:
-    """The simulated identification experiment (Fig. 9) and its fit."""
-
-    gaps_mm: tuple[float, float, float, float, float] = (1.2, 1.3, 1.5, 1.7, 1.75)
-    """Air gaps of the major-loop measurements (mm)."""
-    duration: float = 2.0
-    """Length of each 0 → max → 0 current run (s)."""
-    seed: int = 0
-    """Seed of the force-measurement noise."""
-    window: int = 10
-    """Samples averaged per look-up-table point (1: the paper's plain table). Noise in the
-    table goes 1:1 into the linearisation error; 10 samples of the decimated 2.5 kHz record
-    (4 ms) cut σ = 0.05 N to about 0.016 N."""
-    force_margin: float = 0.03
-    """Identify up to this fraction beyond the operating force, so the table covers the peak."""
-
-    def __post_init__(self):
-        if sorted(self.gaps_mm) != list(self.gaps_mm) or len(set(self.gaps_mm)) != len(self.gaps_mm):
-            raise ValueError(f"gaps_mm must increase strictly, got {self.gaps_mm}")
-        if not self.duration > 0 or self.window < 1:
-            raise ValueError("duration must be > 0 and window >= 1")
+from hystmpc.plants.reluctance import C_CORE, ReluctanceActuator, ReluctanceParams
 
 
 @dataclass(frozen=True)
@@ -86,78 +48,14 @@ class ForceTableSettings:
     kink_eps: float = 0.0
     """Width (A, in H's output X) over which each kink of the table's polyline is rounded;
     0: the polyline itself, found by binary search. Rounded, its ~100 kinks cost one
-    square root each, about half of the C controller's step (docs/reluctance.md)."""
+    square root each, a large share of the C controller's step (docs/reluctance.md)."""
 
     def __post_init__(self):
         if not (np.isfinite(self.kink_eps) and self.kink_eps >= 0):
             raise ValueError(f"kink_eps must be finite and >= 0 (0: the exact polyline), got {self.kink_eps}")
 
 
-@functools.lru_cache(maxsize=8)
-def identify(plant: ReluctanceParams, settings: IdentificationSettings, force_max: float) -> ReluctanceModel:
-    """Run the simulated identification experiment on ``plant`` and fit the model (cached)."""
-    loops = {g * 1e-3: major_loop_measurement(plant, g * 1e-3, force_max * (1 + settings.force_margin),
-                                              settings.duration, seed=settings.seed + k)
-             for k, g in enumerate(settings.gaps_mm)}
-    return fit_reluctance_model(loops, window=settings.window)
-
-
-def rig(config) -> tuple[ReluctanceParams, float, float]:
-    """The configured core's plant parameters, air gap (m) and force range (N)."""
-    settings: RigSettings = config["rig"]
-    plant = config["ecore"] if settings.core == "E" else config["ccore"]
-    return plant, settings.gap_mm * 1e-3, FORCE_MAX[settings.core]
-
-
-def identified_model(config) -> ReluctanceModel:
-    """The controllers' model for the configured core."""
-    plant, _, force_max = rig(config)
-    return identify(plant, config["identification"], force_max)
-
-
-def measured_loops(path) -> dict[float, tuple[np.ndarray, np.ndarray]]:
-    """Major loops from a measured file: one 0 → max → 0 run per air gap (Fig. 9).
-
-    Columns ``t``, ``u`` (current, A), ``y`` (force, N) and ``gap_mm``. ``ValueError`` naming
-    what is wrong.
-    """
-    from hystmpc.experiments.reference import read_columns
-    data = read_columns(path, ("t", "u", "y", "gap_mm"), "loop file", minimum_rows=20)
-    loops = {}
-    for gap in np.unique(data[:, 3]):
-        rows = data[data[:, 3] == gap]
-        if not 1.0 <= gap <= 2.0:
-            raise ValueError(f"loop file {path}: gap_mm {gap:g} is outside the rig's [1.0, 2.0] mm")
-        if len(rows) < 20 or np.ptp(rows[:, 1]) <= 0:
-            raise ValueError(f"loop file {path}: the loop at gap {gap:g} mm needs 20 rows and a varying current")
-        loops[float(gap) * 1e-3] = (rows[:, 1], rows[:, 2])
-    return loops
-
-
-def identified_document(config, loops: dict | None = None) -> dict:
-    """The identified model of the configured core as a JSON-ready dict (``hystmpc identify``).
-
-    It comes from the simulated experiment, or from measured ``loops`` (:func:`measured_loops`).
-    """
-    plant, _, force_max = rig(config)
-    if loops is None:
-        model = identified_model(config)
-        truth = {"true_p1_A": plant.p1, "true_p2_per_A_m": plant.p2}
-    else:
-        model = fit_reluctance_model(loops, window=config["identification"].window)
-        truth = {"source": "measured loops"}
-    return {
-        "schema": "hystmpc.identified/1", "bench": "reluctance", "core": config["rig"].core,
-        "p1_A": model.p1, "p2_per_A_m": model.p2, **truth,
-        "gaps_m": list(model.gaps),
-        "tables": [{"gap_m": g, "force_N": f.tolist(), "x_A": x.tolist()}
-                   for g, (f, x) in zip(model.gaps, model.tables, strict=True)],
-        "poly_inverse": {"features": "sqrt(F)^a * (g/1mm)^b, a+b<=4, a outer", "coefficients": model.poly.tolist()},
-        "force_max_N": force_max,
-    }
-
-
-def build(kind: str, config: dict):
+def _build(kind: str, config: dict):
     """``poly-inverse``, ``hyst-inverse``, ``lmpc`` or ``nmpc`` on the identified model of the configured rig."""
     plant, gap, _ = rig(config)
     model = identified_model(config)
@@ -227,13 +125,14 @@ BENCH = Bench(
     scenarios=_scenarios(),
     controllers={
         "poly-inverse": ControllerSpec("poly-inverse", "single-valued 4th-order polynomial inverse",
-                                       functools.partial(build, "poly"), IDENTIFIED),
+                                       functools.partial(_build, "poly"), IDENTIFIED),
         "hyst-inverse": ControllerSpec("hyst-inverse", "IH[Lut(F, g)], eq. (12a), Fig. 10",
-                                       functools.partial(build, "hyst"), IDENTIFIED),
+                                       functools.partial(_build, "hyst"), IDENTIFIED),
         "inverse-lmpc": ControllerSpec("inverse-lmpc", "IH[Lut(F, g)] + linear MPC (OSQP) with the slew limit",
-                                       functools.partial(build, "lmpc"), (*IDENTIFIED, "lmpc")),
+                                       functools.partial(_build, "lmpc"), (*IDENTIFIED, "lmpc")),
         "nmpc": ControllerSpec("nmpc", "feed-forward NMPC: currents over a horizon, slew limit, F = Lut⁻¹(H[i])",
-                               functools.partial(build, "nmpc"), (*IDENTIFIED, "nmpc", "smoothing", "table", "solver")),
+                               functools.partial(_build, "nmpc"), (*IDENTIFIED, "nmpc", "smoothing", "table", "solver"),
+                               planner="inverse-lmpc"),
     },
     defaults=_defaults,
     make_plant=lambda c: ReluctanceActuator(rig(c)[0], rig(c)[1]),

@@ -20,7 +20,13 @@ __all__ = ["UsageError", "build_parser", "entry_point", "main"]
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``hystmpc``."""
+    """The argument parser of ``hystmpc``.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        A :class:`~hystmpc.experiments.cli.common.Parser` with every command's subparser.
+    """
     parser = Parser(prog="hystmpc", description="NMPC for actuators with hysteresis: benches from four papers.")
     from hystmpc.experiments.report import version
     parser.add_argument("--version", action="version", version=f"hystmpc {version()}")
@@ -85,8 +91,7 @@ def _one_blas_thread() -> None:
     """BLAS on one thread, unless the user chose otherwise.
 
     Every matrix here is small, and on a loaded machine BLAS threads wait for each other
-    (``identify`` on the piezo example with two busy cores took 12.6 s, on one thread 4.6 s).
-    Sweep workers inherit the setting.
+    (``identify`` runs faster on one thread there). Sweep workers inherit the setting.
     """
     if "OPENBLAS_NUM_THREADS" in os.environ or "MKL_NUM_THREADS" in os.environ:
         return
@@ -96,7 +101,19 @@ def _one_blas_thread() -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point; returns the exit code."""
+    """Entry point; returns the exit code.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments after ``hystmpc`` (default: ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        The command's own (0 on success); 2 bad usage or input, 1 any other error, 130
+        interrupted, 141 the output's reader went away.
+    """
     _one_blas_thread()
     try:
         args = _parse(sys.argv[1:] if argv is None else argv)

@@ -27,7 +27,13 @@ from hystmpc.experiments.cli.common import (
 
 
 def add_parser(sub) -> None:
-    """Register ``codegen`` on the subcommand parsers ``sub``."""
+    """Register ``codegen`` on the subcommand parsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        What ``add_subparsers`` returned for ``hystmpc``.
+    """
     p_cg = sub.add_parser("codegen", help="write, build and load the C solver of a bench's NMPC")
     p_cg.add_argument("bench", help=BENCH_HELP)
     p_cg.add_argument("--solver", default="rti", help="rti (the only code-generated variant so far)")
@@ -50,7 +56,18 @@ CODEGEN_TARGETS = ("cortex-m7",)
 
 
 def command(args) -> int:
-    """Run ``codegen``; returns the exit code."""
+    """Run ``codegen``; returns the exit code.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+
+    Returns
+    -------
+    int
+        0; bad usage or input raises ``UsageError`` (exit 2).
+    """
     from hystmpc.experiments.realtime import codegen
     bench = bench_named(args.bench)
     if args.solver not in CODEGEN_SOLVERS:

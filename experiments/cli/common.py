@@ -34,7 +34,13 @@ class Parser(argparse.ArgumentParser):
     """An argument parser whose errors are one line and exit 2 (a :class:`UsageError`)."""
 
     def error(self, message):
-        """Raise a :class:`UsageError` (argparse prints usage and exits otherwise)."""
+        """Raise a :class:`UsageError` (argparse prints usage and exits otherwise).
+
+        Parameters
+        ----------
+        message : str
+            argparse's description of the problem.
+        """
         raise UsageError(message)
 
 
@@ -43,7 +49,20 @@ JSON_HELP = "also write the {} to this file ('-': standard output, instead of th
 
 
 def timestamped(folder: Path, prefix: str = "") -> Path:
-    """A new folder name under ``folder``: ``<prefix><UTC timestamp>``, suffixed if taken."""
+    """A new folder name under ``folder``: ``<prefix><UTC timestamp>``, suffixed if taken.
+
+    Parameters
+    ----------
+    folder : Path
+        The parent folder.
+    prefix : str, optional
+        Text before the timestamp.
+
+    Returns
+    -------
+    Path
+        A path that does not exist yet (the folder is not created).
+    """
     stamp = prefix + dt.datetime.now(dt.UTC).strftime("%Y%m%dT%H%M%SZ")
     path, n = folder / stamp, 1
     while path.exists():
@@ -57,6 +76,20 @@ def output_folder(path: Path, option: str = "--out", overwrite: bool = True) -> 
 
     ``UsageError`` for a file, a folder that cannot be written, or (unless ``overwrite``)
     a folder that already holds files.
+
+    Parameters
+    ----------
+    path : Path
+        The output folder.
+    option : str, optional
+        The option that named it, for the messages.
+    overwrite : bool, optional
+        Accept a folder that already holds files.
+
+    Returns
+    -------
+    bool
+        Whether this call created the folder.
     """
     if path.exists() and not path.is_dir():
         raise UsageError(f"{option} {str(path)!r} is a file; give a folder")
@@ -74,7 +107,18 @@ def output_folder(path: Path, option: str = "--out", overwrite: bool = True) -> 
 
 
 def checked_json_target(value: str | None) -> Path | str | None:
-    """``--json``'s file, checked (its folder created) before any work; ``'-'`` is standard output."""
+    """``--json``'s file, checked (its folder created) before any work; ``'-'`` is standard output.
+
+    Parameters
+    ----------
+    value : str or None
+        The ``--json`` value.
+
+    Returns
+    -------
+    Path, str or None
+        The file, ``'-'``, or None without ``--json``.
+    """
     if value is None or value == "-":
         return value
     path = Path(value)
@@ -90,7 +134,15 @@ def checked_json_target(value: str | None) -> Path | str | None:
 
 
 def write_json_target(doc: dict, target: Path | str | None) -> None:
-    """Write ``doc`` to ``--json``'s target: a file, standard output (``'-'``), or nowhere (None)."""
+    """Write ``doc`` to ``--json``'s target: a file, standard output (``'-'``), or nowhere (None).
+
+    Parameters
+    ----------
+    doc : dict
+        The document (strict JSON).
+    target : Path, str or None
+        What :func:`checked_json_target` returned.
+    """
     if target == "-":
         json.dump(doc, sys.stdout, indent=2, allow_nan=False)
         sys.stdout.write("\n")
@@ -100,7 +152,20 @@ def write_json_target(doc: dict, target: Path | str | None) -> None:
 
 @contextlib.contextmanager
 def cleanup_on_error(folder: Path, created: bool):
-    """Remove ``folder`` if the work in it fails and this command created it: nothing half-written stays."""
+    """Remove ``folder`` if the work in it fails and this command created it: nothing half-written stays.
+
+    Parameters
+    ----------
+    folder : Path
+        The output folder.
+    created : bool
+        Whether this command created it (:func:`output_folder`).
+
+    Yields
+    ------
+    None
+        Control to the work; its exception is raised again after the cleanup.
+    """
     try:
         yield
     except BaseException:
@@ -111,13 +176,32 @@ def cleanup_on_error(folder: Path, created: bool):
 
 @contextlib.contextmanager
 def solver_log(path: Path):
-    """Solver and CasADi warnings (written to Python's stderr) go to ``path``, not the terminal."""
+    """Solver and CasADi warnings (written to Python's stderr) go to ``path``, not the terminal.
+
+    Parameters
+    ----------
+    path : Path
+        The log file, appended to.
+
+    Yields
+    ------
+    None
+        Control to the work, with ``sys.stderr`` redirected.
+    """
     with open(path, "a") as log, contextlib.redirect_stderr(log):
         yield
 
 
 def report_solver_log(path: Path, quiet: bool) -> None:
-    """Say how many lines of solver warnings went to ``path``; remove it when empty."""
+    """Say how many lines of solver warnings went to ``path``; remove it when empty.
+
+    Parameters
+    ----------
+    path : Path
+        The log file (nothing happens if it does not exist).
+    quiet : bool
+        Say nothing (an empty file is still removed).
+    """
     if not path.exists():
         return
     with path.open() as log:
@@ -129,14 +213,42 @@ def report_solver_log(path: Path, quiet: bool) -> None:
 
 
 def check_seed(value: int) -> int:
-    """``--seed``, checked (an integer >= 0)."""
+    """``--seed``, checked (an integer >= 0).
+
+    Parameters
+    ----------
+    value : int
+        The ``--seed`` value.
+
+    Returns
+    -------
+    int
+        ``value``; a negative one raises ``UsageError``.
+    """
     if value < 0:
         raise UsageError(f"--seed must be an integer >= 0, got {value}")
     return value
 
 
 def checked_samples(duration: float, sample_period: float, what: str, force: bool) -> int:
-    """The samples ``duration`` takes, within the work limits (``--force`` lifts them)."""
+    """The samples ``duration`` takes, within the work limits (``--force`` lifts them).
+
+    Parameters
+    ----------
+    duration : float
+        Length of the run (s).
+    sample_period : float
+        Sample period (s).
+    what : str
+        What sets the duration (``--duration`` or ``scenario NAME``), for the messages.
+    force : bool
+        Lift the ceiling on samples per run.
+
+    Returns
+    -------
+    int
+        The samples; ``UsageError`` for a bad duration or one above the limit.
+    """
     try:
         n = run_samples(duration, sample_period, what)
         check_run_samples(n, what if what != "--duration" else f"--duration {duration:g}", force)
@@ -146,13 +258,36 @@ def checked_samples(duration: float, sample_period: float, what: str, force: boo
 
 
 def check_duration(value) -> None:
-    """``UsageError`` unless ``--duration`` is absent or a finite number of seconds > 0."""
+    """``UsageError`` unless ``--duration`` is absent or a finite number of seconds > 0.
+
+    Parameters
+    ----------
+    value : float or None
+        The ``--duration`` value (s).
+    """
     if value is not None and not (value > 0 and value != float("inf")):
         raise UsageError(f"--duration must be a finite number of seconds > 0, got {value}")
 
 
 def work_config(bench: Bench, overrides: list[str], force: bool, tuned: bool = True):
-    """The bench's configuration with ``--set`` applied, its horizons within the work limits."""
+    """The bench's configuration with ``--set`` applied, its horizons within the work limits.
+
+    Parameters
+    ----------
+    bench : Bench
+        The bench.
+    overrides : list of str
+        The ``--set KEY=VALUE`` assignments.
+    force : bool
+        Lift the ceiling on horizons.
+    tuned : bool, optional
+        False: the untuned defaults where the bench has them (the baselines are not tuned).
+
+    Returns
+    -------
+    dict
+        The parameter groups; ``UsageError`` for a bad key or value or a horizon above the limit.
+    """
     config = configured(bench, overrides, tuned)
     try:
         check_horizons(config, force)
@@ -162,12 +297,33 @@ def work_config(bench: Bench, overrides: list[str], force: bool, tuned: bool = T
 
 
 def sets_key(overrides: list[str], key: str) -> bool:
-    """Whether one of the ``--set KEY=VALUE`` assignments is ``key``'s."""
+    """Whether one of the ``--set KEY=VALUE`` assignments is ``key``'s.
+
+    Parameters
+    ----------
+    overrides : list of str or None
+        The assignments.
+    key : str
+        The key, e.g. ``nmpc.horizon``.
+
+    Returns
+    -------
+    bool
+        Whether an assignment sets it.
+    """
     return any(item.split("=", 1)[0].strip() == key for item in overrides or ())
 
 
 def checked_codegen_settings(bench: Bench, config) -> None:
-    """``UsageError`` for an NMPC setting that ``codegen`` and ``speed`` do not read."""
+    """``UsageError`` for an NMPC setting that ``codegen`` and ``speed`` do not read.
+
+    Parameters
+    ----------
+    bench : Bench
+        The bench.
+    config : dict
+        Its parameter groups.
+    """
     from hystmpc.experiments.realtime import check_codegen_settings
     try:
         check_codegen_settings(bench, config)
@@ -176,7 +332,18 @@ def checked_codegen_settings(bench: Bench, config) -> None:
 
 
 def bench_named(name: str) -> Bench:
-    """The bench ``name`` (a built-in, a plugin or an actuator file), or a ``UsageError``."""
+    """The bench ``name`` (a built-in, a plugin or an actuator file), or a ``UsageError``.
+
+    Parameters
+    ----------
+    name : str
+        A bench name or an actuator file's path.
+
+    Returns
+    -------
+    Bench
+        The bench.
+    """
     try:
         return get_bench(name)
     except ValueError as exc:
@@ -184,14 +351,39 @@ def bench_named(name: str) -> Bench:
 
 
 def check_names(kind: str, names: list[str], allowed) -> None:
-    """``UsageError`` naming the first of ``names`` that is not in ``allowed``."""
+    """``UsageError`` naming the first of ``names`` that is not in ``allowed``.
+
+    Parameters
+    ----------
+    kind : str
+        What the names are (``scenario``, ``controller``), for the message.
+    names : list of str
+        The names given.
+    allowed : iterable of str
+        The names allowed.
+    """
     for name in names:
         if name not in allowed:
             raise UsageError(f"unknown {kind} {name!r}; allowed: {', '.join(allowed)}")
 
 
 def configured(bench: Bench, overrides: list[str], tuned: bool = True):
-    """The bench's configuration with ``--set`` applied, or a ``UsageError`` naming the bad key."""
+    """The bench's configuration with ``--set`` applied, or a ``UsageError`` naming the bad key.
+
+    Parameters
+    ----------
+    bench : Bench
+        The bench.
+    overrides : list of str
+        The ``--set KEY=VALUE`` assignments.
+    tuned : bool, optional
+        False: the untuned defaults where the bench has them (the baselines are not tuned).
+
+    Returns
+    -------
+    dict
+        The parameter groups.
+    """
     try:
         return bench.configure(overrides, tuned)
     except ValueError as exc:

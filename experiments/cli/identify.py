@@ -14,7 +14,13 @@ from hystmpc.experiments.cli.common import FAMILY_NAMES, UsageError, bench_named
 
 
 def add_parser(sub) -> None:
-    """Register ``identify`` on the subcommand parsers ``sub``."""
+    """Register ``identify`` on the subcommand parsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        What ``add_subparsers`` returned for ``hystmpc``.
+    """
     p_id = sub.add_parser("identify", help="fit a hysteresis model to measured data (or a bench's own identification)")
     p_id.add_argument("family", metavar="FAMILY",
                       help=f"one of {', '.join(FAMILY_NAMES)}; 'auto' for every family, ranked by validation; or "
@@ -53,7 +59,18 @@ IDENTIFIABLE = ("reluctance",)
 
 
 def command(args) -> int:
-    """Run ``identify``; returns the exit code."""
+    """Run ``identify``; returns the exit code.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+
+    Returns
+    -------
+    int
+        0, or 1 when the fit gives no finite result; bad usage or input raises ``UsageError`` (exit 2).
+    """
     if args.family in IDENTIFIABLE:
         return _identify_bench(args)
     if args.family in all_bench_names():
@@ -91,7 +108,7 @@ def _identify_bench(args) -> int:
         raise UsageError("--dynamics is for a model family; the reluctance bench's model has no linear block")
     bench = bench_named(args.family)
     config = configured(bench, args.overrides)
-    from hystmpc.experiments.benches.reluctance import identified_document, measured_loops
+    from hystmpc.experiments.benches.reluctance_identification import identified_document, measured_loops
     from hystmpc.experiments.report import version
     try:
         loops = measured_loops(args.bench_data) if args.bench_data else None

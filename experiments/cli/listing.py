@@ -15,7 +15,13 @@ from hystmpc.mpc.settings import SOLVERS
 
 
 def add_parser(sub) -> None:
-    """Register ``list`` on the subcommand parsers ``sub``."""
+    """Register ``list`` on the subcommand parsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        What ``add_subparsers`` returned for ``hystmpc``.
+    """
     p_list = sub.add_parser("list", help="benches, scenarios, controllers, solver variants")
     p_list.add_argument("bench", nargs="?", help="only this bench (a name, plugin or actuator file)")
     p_list.add_argument("--json", action="store_true", help="machine-readable output")
@@ -27,7 +33,18 @@ TUNED_GROUPS = ("pid", "inverse_ff_pid", "lmpc")
 
 
 def command(args) -> int:
-    """Run ``list``; returns the exit code."""
+    """Run ``list``; returns the exit code.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+
+    Returns
+    -------
+    int
+        0.
+    """
     from hystmpc.experiments.config import key_table
     info, solvers = {}, SOLVERS
     for name in [args.bench] if args.bench else all_bench_names():

@@ -61,7 +61,13 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
 
 
 def add_parsers(sub) -> None:
-    """Register ``run`` and ``compare`` on the subcommand parsers ``sub``."""
+    """Register ``run`` and ``compare`` on the subcommand parsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        What ``add_subparsers`` returned for ``hystmpc``.
+    """
     p_run = sub.add_parser("run", help="one closed-loop run")
     p_run.add_argument("bench", help=BENCH_HELP)
     p_run.add_argument("scenario", nargs="?", help="one of the bench's scenarios (optional with --reference)")
@@ -77,7 +83,19 @@ def add_parsers(sub) -> None:
 
 
 def run_command(args) -> int:
-    """Run ``run``; returns the exit code."""
+    """Run ``run``; returns the exit code.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+
+    Returns
+    -------
+    int
+        0, or 1 when the plant's measurement was not finite in the run (its result is written);
+        bad usage or input raises ``UsageError`` (exit 2).
+    """
     bench = bench_named(args.bench)
     if args.scenario is None and args.reference is None:
         raise UsageError(f"name a scenario ({', '.join(bench.scenarios)}) or give --reference FILE.csv")
@@ -88,7 +106,19 @@ def run_command(args) -> int:
 
 
 def compare_command(args) -> int:
-    """Run ``compare``; returns the exit code."""
+    """Run ``compare``; returns the exit code.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+
+    Returns
+    -------
+    int
+        0, or 1 when the plant's measurement was not finite in some run (the results are written);
+        bad usage or input raises ``UsageError`` (exit 2).
+    """
     bench = bench_named(args.bench)
     scenarios = args.scenarios or ([] if args.reference else list(bench.scenarios))
     check_names("scenario", scenarios, bench.scenarios)
@@ -125,13 +155,10 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
         raise UsageError("--reference replaces one scenario's reference: name one scenario at most")
     # checked before the baselines are tuned (an actuator file's first run tunes them for seconds to minutes)
     config = work_config(bench, args.overrides, args.force, tuned=False)
-    if "nmpc" in controllers and "nmpc" in config:
-        from hystmpc.experiments.firmware import check_runtime
-        try:
-            config["nmpc"].check_combination(config.get("solver"))  # before any baseline runs
-            check_runtime(config)
-        except ValueError as exc:
-            raise UsageError(str(exc)) from None
+    try:
+        bench.validate(config, controllers)  # before any baseline runs
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
     if args.reference is not None and not scenario_names:
         scenarios = [_scenario(bench, None, args.reference)]
     else:

@@ -29,7 +29,13 @@ from hystmpc.mpc.settings import SOLVERS
 
 
 def add_parser(sub) -> None:
-    """Register ``speed`` on the subcommand parsers ``sub``."""
+    """Register ``speed`` on the subcommand parsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        What ``add_subparsers`` returned for ``hystmpc``.
+    """
     p_sp = sub.add_parser("speed", help="per-step compute of every solver variant on the default scenario")
     p_sp.add_argument("bench", help=BENCH_HELP)
     p_sp.add_argument("--variants", help="comma-separated solver variants (default: the bench's own solver, "
@@ -46,7 +52,18 @@ def add_parser(sub) -> None:
 
 
 def command(args) -> int:
-    """Run ``speed``; returns the exit code."""
+    """Run ``speed``; returns the exit code.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+
+    Returns
+    -------
+    int
+        0; bad usage or input raises ``UsageError`` (exit 2).
+    """
     from hystmpc.experiments.realtime import speed, speed_table
     from hystmpc.experiments.report import version
     bench = bench_named(args.bench)

@@ -22,7 +22,13 @@ from hystmpc.experiments.cli.common import (
 
 
 def add_parser(sub) -> None:
-    """Register ``sweep`` on the subcommand parsers ``sub``."""
+    """Register ``sweep`` on the subcommand parsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        What ``add_subparsers`` returned for ``hystmpc``.
+    """
     p_sw = sub.add_parser("sweep", help="many runs: scenarios × controllers × seeds × plant perturbations")
     p_sw.add_argument("spec", metavar="SPEC.toml", help="sweep spec (interface.md)")
     p_sw.add_argument("--workers", type=int, help=f"worker processes (default: the core count, {os.cpu_count()})")
@@ -47,7 +53,18 @@ EXECUTORS = ("local", "dask")
 
 
 def command(args) -> int:
-    """Run ``sweep``; returns the exit code."""
+    """Run ``sweep``; returns the exit code.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+
+    Returns
+    -------
+    int
+        0, or 1 when every recorded run failed; bad usage or input raises ``UsageError`` (exit 2).
+    """
     from hystmpc.experiments.sweep import run_sweep
     from hystmpc.experiments.sweep_spec import SpecError, load_spec
     from hystmpc.experiments.sweep_summary import summary_table

@@ -99,7 +99,18 @@ class Signals:
 
 
 def c_name(name: str) -> str:
-    """``name`` as a C identifier: other characters turn into ``_``, a leading digit gets ``c_``."""
+    """``name`` as a C identifier: other characters turn into ``_``, a leading digit gets ``c_``.
+
+    Parameters
+    ----------
+    name : str
+        Any non-empty name.
+
+    Returns
+    -------
+    str
+        The identifier.
+    """
     name = re.sub(r"\W", "_", name, flags=re.ASCII)
     return f"c_{name}" if name[0].isdigit() else name
 
@@ -108,7 +119,7 @@ def write_controller(code: ControllerCode, out: Path, name: str, signals: Signal
                      origin: str, version: str, build: bool = True) -> dict:
     """Write the controller's C files into ``out`` and build them (shared library and example loop).
 
-    Returns what was written: names, sizes, the memory layout.
+    Raises ``RuntimeError`` when the build fails.
 
     Parameters
     ----------
@@ -124,10 +135,14 @@ def write_controller(code: ControllerCode, out: Path, name: str, signals: Signal
         Seconds per sample.
     origin, version : str
         Where the controller comes from (a bench's name) and the hystmpc version, for the header.
-    build : bool
+    build : bool, optional
         False: write the sources and the Makefile only.
 
-    Raises ``RuntimeError`` when the build fails.
+    Returns
+    -------
+    dict
+        What was written: the ``name``, the ``folder``, its ``files``, ``memory_doubles``, the
+        ``sensitivity_block`` and ``c_kB`` (kB of the two generated C files).
     """
     feedback, prepare = code.feedback, code.prepare
     out.mkdir(parents=True, exist_ok=True)
@@ -201,6 +216,19 @@ def build_controller_library(out: Path, name: str, include: list[str], libraries
     """Build ``lib<name>.so`` (and, with ``example``, ``<name>_main``) in ``out``.
 
     Uses the system compiler; ``RuntimeError`` when there is none or the build fails.
+
+    Parameters
+    ----------
+    out : Path
+        The folder :func:`write_controller` wrote.
+    name : str
+        The controller's C name.
+    include : list of str
+        Include flags of the QP library (:func:`~hystmpc.mpc.codegen.toolchain.library_flags`).
+    libraries : list of str
+        Its link flags.
+    example : bool, optional
+        Also build the example loop ``<name>_main``.
     """
     cc = c_compiler()
     if cc is None:
@@ -224,7 +252,23 @@ def build_cached(written: Path, name: str, root: Path, reason: str) -> Path:
     """``lib<name>.so`` of the controller written in ``written``, built once per distinct source.
 
     The source is hashed with the compiler, its flags and the QP library's, and built into
-    ``root/<hash>`` by an atomic rename; ``reason`` says why, on the log, when it is built.
+    ``root/<hash>`` by an atomic rename.
+
+    Parameters
+    ----------
+    written : Path
+        The folder :func:`write_controller` wrote.
+    name : str
+        The controller's C name.
+    root : Path
+        The folder of the cached builds.
+    reason : str
+        Why it is built, said on the log when it is.
+
+    Returns
+    -------
+    Path
+        ``root/<hash>/lib<name>.so``.
     """
     cc = c_compiler()
     include, libraries = library_flags((written / f"{name}_nmpc.c").read_text())
@@ -307,7 +351,20 @@ class CompiledController:
         self.statuses: dict[int, int] = {}
 
     def step(self, measurement, ref_window) -> float:
-        """``<name>_step`` then ``<name>_prepare``."""
+        """``<name>_step`` then ``<name>_prepare``.
+
+        Parameters
+        ----------
+        measurement : Measurement
+            This sample's sensors.
+        ref_window : ndarray
+            The references ``r_k..r_{k+N}`` (``horizon + 1`` samples).
+
+        Returns
+        -------
+        float
+            The input to send.
+        """
         refs = np.asarray(ref_window, float).ravel()
         if len(refs) != self.horizon + 1:
             raise ValueError(f"ref_window needs {self.horizon + 1} samples, got {len(refs)}")
@@ -332,6 +389,12 @@ class CompiledController:
 
         Each failure is a fallback; there are no iteration counts (the RTI steps per sample
         are fixed).
+
+        Returns
+        -------
+        dict
+            ``name``, ``failures``, ``fallbacks``, ``estimator_resets``, and ``statuses`` (count
+            per status, named as in :data:`STATUS_CODES`).
         """
         failures = int(self._failures(self._ctrl))
         return {"name": "generated C", "failures": failures, "fallbacks": failures,

@@ -32,9 +32,22 @@ headers are 0.5.1's), so the firmware's QP computes what the host build's does."
 def daqp_arena_doubles(n: int, m: int, ms: int) -> int:
     """Doubles DAQP 0.5.1 allocates in one solve of a dense QP.
 
-    The QP has ``n`` variables and ``m`` constraints, ``ms`` of them simple bounds (no
-    binaries, no soft constraints); each block is rounded up to whole doubles: the workspace
+    No binaries, no soft constraints; each block is rounded up to whole doubles: the workspace
     (``allocate_daqp_workspace``) and the LDP (``setup_daqp_ldp`` with H and f given).
+
+    Parameters
+    ----------
+    n : int
+        Variables of the QP.
+    m : int
+        Constraints of the QP.
+    ms : int
+        How many of the ``m`` constraints are simple bounds.
+
+    Returns
+    -------
+    int
+        Doubles of the workspace and the LDP together.
     """
     def ints(k: int) -> int:
         return (4 * k + 7) // 8
@@ -54,7 +67,13 @@ def daqp_sources() -> Path:
     once into the cache from PyPI (the sdist of :data:`DAQP_VERSION`, with pip, so pip's own
     index settings apply).
 
-    Raises :class:`DaqpSourcesMissing` when none of these has them.
+    Raises :class:`DaqpSourcesMissing` when none of these has them, and ``ValueError`` when
+    ``$HYSTMPC_DAQP_SOURCES`` names a folder without ``include/api.h`` and ``src/``.
+
+    Returns
+    -------
+    Path
+        The folder holding ``include/`` and ``src/``.
     """
     import tarfile
     import tempfile
@@ -93,11 +112,25 @@ def cross_compile(out: Path, name: str, compiler: str = "arm-none-eabi-gcc") -> 
     """Build the generated controller in ``out`` for a Cortex-M7 and measure it.
 
     The build uses :data:`CORTEX_M7_FLAGS`, newlib without system calls and libm, around the
-    firmware loop template (``templates/firmware.c.in``).
+    firmware loop template (``templates/firmware.c.in``), in ``out/cortex-m7``; DAQP's sources
+    are compiled in where the step uses DAQP. Raises ``RuntimeError`` when the cross compiler
+    is missing or the build fails.
 
-    Returns the ELF's ``text``, ``data`` and ``bss`` in bytes (``arm-none-eabi-size``), the
-    flags, and the QP (DAQP's sources are compiled in where the step uses DAQP). Raises
-    ``RuntimeError`` when the cross compiler is missing or the build fails.
+    Parameters
+    ----------
+    out : Path
+        The folder :func:`~hystmpc.mpc.codegen.controller.write_controller` wrote.
+    name : str
+        The controller's C name.
+    compiler : str, optional
+        The cross compiler; its ``size`` and ``nm`` are found by replacing ``gcc`` in its name.
+
+    Returns
+    -------
+    dict
+        ``target``, the ``elf`` path, its ``text``, ``data`` and ``bss`` in bytes (``size``),
+        ``heap`` (whether a malloc or ``_sbrk`` is linked in), the ``flags``, the ``qp`` and the
+        ``compiler`` version.
     """
     gcc = shutil.which(compiler)
     size_tool = shutil.which(compiler.replace("gcc", "size"))
@@ -131,8 +164,23 @@ def cross_compile(out: Path, name: str, compiler: str = "arm-none-eabi-gcc") -> 
 def daqp_on_arena(cc: list[str], flags: list[str], name: str, build: Path) -> tuple[list[str], list[str]]:
     """Compile DAQP's sources into ``build`` with ``cc`` and ``flags``, on the static arena.
 
-    Their malloc, calloc and free are taken from ``<name>_qp_arena.c``; returns the include
-    flags for DAQP's headers and the object files.
+    Their malloc, calloc and free are taken from ``<name>_qp_arena.c``.
+
+    Parameters
+    ----------
+    cc : list of str
+        The C compiler command.
+    flags : list of str
+        Compiler flags.
+    name : str
+        The controller's C name (prefix of the arena's allocator).
+    build : Path
+        The folder of the headers' copy and the object files.
+
+    Returns
+    -------
+    tuple of (list of str, list of str)
+        The include flags for DAQP's headers, and the object files.
     """
     daqp = daqp_sources()
     headers = build / "include"
@@ -150,7 +198,20 @@ def casadi_daqp_on_arena(name: str, build: Path) -> tuple[list[str], list[str]]:
     """CasADi's static DAQP library with its malloc, calloc and free renamed to the arena's.
 
     The renaming is ``objcopy --redefine-sym``, what ``-D`` does to the sources, for a check
-    on this machine without DAQP's sources; returns the include flags and the renamed library.
+    on this machine without DAQP's sources. Raises :class:`DaqpSourcesMissing` when there is no
+    static library, objcopy or nm, or the renamed library still calls the system allocator.
+
+    Parameters
+    ----------
+    name : str
+        The controller's C name (prefix of the arena's allocator).
+    build : Path
+        The folder of the renamed library.
+
+    Returns
+    -------
+    tuple of (list of str, list of str)
+        The include flags, and the renamed library.
     """
     include, libraries = library_flags("#include <daqp/")
     objcopy = shutil.which("objcopy")
@@ -171,10 +232,23 @@ def casadi_daqp_on_arena(name: str, build: Path) -> tuple[list[str], list[str]]:
 def static_qp_loop(out: Path, name: str, recording: Path) -> tuple[np.ndarray, str]:
     """The example loop built as the firmware is, for this machine, run on ``recording``.
 
-    As the firmware: DAQP's own sources, their malloc from ``<name>_qp_arena.c``. Returns its
-    inputs and which DAQP it linked. Without DAQP's sources (offline, none cached) it links
-    CasADi's DAQP library on the same arena instead (:func:`casadi_daqp_on_arena`), after a
-    notice.
+    As the firmware: DAQP's own sources, their malloc from ``<name>_qp_arena.c``. Without DAQP's
+    sources (offline, none cached) it links CasADi's DAQP library on the same arena instead
+    (:func:`casadi_daqp_on_arena`), after a notice.
+
+    Parameters
+    ----------
+    out : Path
+        The folder :func:`~hystmpc.mpc.codegen.controller.write_controller` wrote.
+    name : str
+        The controller's C name.
+    recording : Path
+        The sensor file the example loop reads.
+
+    Returns
+    -------
+    tuple of (ndarray, str)
+        The loop's inputs, one per sample, and which DAQP it linked.
     """
     cc = c_compiler()
     build = out / "static-qp"

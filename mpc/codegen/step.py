@@ -25,7 +25,14 @@ from hystmpc.mpc.codegen.toolchain import (
 
 
 class RecordingStep:
-    """Wraps an RTI Function: records every ``(w0, p)`` it is called with."""
+    """Wraps an RTI Function: records every ``(w0, p)`` it is called with.
+
+    Parameters
+    ----------
+    fun : callable
+        The RTI step, called as ``fun(w0, p)``; ``calls`` holds each call's ``w0`` and ``p``,
+        flattened and joined.
+    """
 
     def __init__(self, fun):
         self.fun = fun
@@ -42,6 +49,18 @@ def write_step(step: ca.Function, out: Path) -> ca.Function:
 
     Writes a header, ``main.c`` and a Makefile too; builds the shared library and the replay
     program. ``RuntimeError`` when there is no C compiler or the build fails.
+
+    Parameters
+    ----------
+    step : casadi.Function
+        The RTI step, ``(w0, p) -> w_next``.
+    out : Path
+        The folder (made if missing).
+
+    Returns
+    -------
+    casadi.Function
+        ``rti_step`` loaded from ``out/librti_step.so``.
     """
     out.mkdir(parents=True, exist_ok=True)
     gen = ca.CodeGenerator("rti_step.c", {"with_header": True})
@@ -76,7 +95,25 @@ def _compile(out: Path) -> None:
 
 
 def run_program(out: Path, calls: np.ndarray, n_w: int, repeats: int = 1) -> tuple[np.ndarray, dict]:
-    """Run the standalone program on recorded calls; returns (w_next per call, timing in µs)."""
+    """Run the standalone program on recorded calls.
+
+    Parameters
+    ----------
+    out : Path
+        The folder :func:`write_step` built.
+    calls : ndarray
+        One row per call: ``w0`` then ``p`` (``RecordingStep.calls``).
+    n_w : int
+        Length of ``w0``.
+    repeats : int, optional
+        How many times the program replays all the calls.
+
+    Returns
+    -------
+    tuple of (ndarray, dict)
+        ``w_next`` per call (one row each), and the timing per call: ``median_us``, ``p95_us``,
+        ``max_us`` (µs) and ``calls``.
+    """
     inputs, outputs = out / "inputs.txt", out / "outputs.txt"
     header = f"{n_w} {calls.shape[1] - n_w} {calls.shape[0]}"
     np.savetxt(inputs, calls, fmt="%.17g", header=header, comments="")

@@ -27,21 +27,30 @@ import casadi as ca
 def cache_dir() -> Path:
     """Where compiled solvers and controllers are kept.
 
-    ``$HYSTMPC_CACHE`` (compiled code only), else :func:`user_cache_dir`.
+    Returns
+    -------
+    Path
+        ``$HYSTMPC_CACHE`` (compiled code only), else :func:`user_cache_dir`.
     """
     return Path(os.environ.get("HYSTMPC_CACHE") or user_cache_dir())
 
 
 def user_cache_dir() -> Path:
-    """Hystmpc's cache: ``$HYSTMPC_CACHE_DIR``, else ``$XDG_CACHE_HOME/hystmpc`` (``~/.cache/hystmpc``)."""
+    """Hystmpc's cache.
+
+    Returns
+    -------
+    Path
+        ``$HYSTMPC_CACHE_DIR``, else ``$XDG_CACHE_HOME/hystmpc`` (``~/.cache/hystmpc``).
+    """
     if os.environ.get("HYSTMPC_CACHE_DIR"):
         return Path(os.environ["HYSTMPC_CACHE_DIR"])
     return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "hystmpc"
 
 
 COMPILE_FLAGS = ("-O2", "-ffp-contract=off")
-"""Flags of the compiled step. ``-O2``: on pam's step (N = 20, 0.54 MB of C) it compiles in
-about 6 s and runs as fast as ``-O3`` (docs/realtime.md). ``-ffp-contract=off``: no fused
+"""Flags of the compiled step. ``-O2``: on pam's step (N = 20) it compiles faster than ``-O3``
+and runs as fast (docs/realtime.md). ``-ffp-contract=off``: no fused
 multiply-adds, so the compiled step rounds as the in-process one does on any CPU."""
 
 LOG = logging.getLogger("hystmpc")
@@ -50,7 +59,11 @@ LOG = logging.getLogger("hystmpc")
 def c_compiler() -> list[str] | None:
     """The system C compiler as a command if its program is on the PATH, else None.
 
-    ``CC`` (which may carry a launcher or options such as ``ccache gcc``), or ``cc``.
+    Returns
+    -------
+    list of str or None
+        ``CC`` (which may carry a launcher or options such as ``ccache gcc``), or ``cc``, with
+        its program resolved on the PATH; None when it is not found or ``CC`` does not parse.
     """
     try:
         words = shlex.split(os.environ.get("CC", "")) or ["cc"]
@@ -68,6 +81,20 @@ def compile_function(fun: ca.Function, out_dir: Path | None = None, flags=COMPIL
     problem compiles once; a compilation says what it does on the ``hystmpc`` logger.
     Raises ``RuntimeError`` with the compiler's message on failure, and
     :class:`CompilerNotFound` when there is no compiler.
+
+    Parameters
+    ----------
+    fun : casadi.Function
+        The function to compile; its name names the source and the library.
+    out_dir : Path, optional
+        Folder of the builds (default: :func:`cache_dir`).
+    flags : tuple of str, optional
+        Compiler flags (default: :data:`COMPILE_FLAGS`).
+
+    Returns
+    -------
+    casadi.Function
+        The compiled library loaded with ``casadi.external``.
     """
     out_dir = Path(out_dir) if out_dir is not None else cache_dir()
     name = fun.name()
@@ -105,8 +132,16 @@ def compile_function(fun: ca.Function, out_dir: Path | None = None, flags=COMPIL
 def library_flags(source: str) -> tuple[list[str], list[str]]:
     """``(include flags, libraries)`` that generated C needs beyond libm.
 
-    DAQP's headers and static library from the CasADi package when the source calls DAQP,
-    else nothing.
+    Parameters
+    ----------
+    source : str
+        The generated C.
+
+    Returns
+    -------
+    tuple of (list of str, list of str)
+        DAQP's headers and library from the CasADi package (its static library when there is
+        one, else the shared one with an rpath) when the source includes DAQP, else two empty lists.
     """
     if "#include <daqp/" not in source:
         return [], []
@@ -126,6 +161,20 @@ def compiled_or_slower(fun: ca.Function, notice: str, flags=COMPILE_FLAGS) -> ca
 
     Where it cannot be compiled (no compiler, one that fails, a cache it cannot write), a
     one-line notice says ``<why>: <notice>``.
+
+    Parameters
+    ----------
+    fun : casadi.Function
+        The function to compile.
+    notice : str
+        The end of the warning logged when it cannot be compiled.
+    flags : tuple of str, optional
+        Compiler flags (default: :data:`COMPILE_FLAGS`).
+
+    Returns
+    -------
+    casadi.Function
+        The compiled function, or ``fun`` itself.
     """
     try:
         return compile_function(fun, flags=flags)
@@ -138,6 +187,16 @@ def compiled_or_in_process(fun: ca.Function) -> tuple[ca.Function, bool]:
     """``(fun compiled, True)``, or ``(fun, False)`` with a one-line notice without a compiler.
 
     Without a C compiler, ``rti-c`` runs the same step in-process, as ``rti``.
+
+    Parameters
+    ----------
+    fun : casadi.Function
+        The function to compile.
+
+    Returns
+    -------
+    tuple of (casadi.Function, bool)
+        The function to call, and whether it is compiled.
     """
     try:
         return compile_function(fun), True
@@ -156,6 +215,16 @@ def accept_last_qp_iterate(source: str) -> str:
     qrqp: every status returns 0. DAQP: the step goes on whatever DAQP's exit, and when its
     setup fails (an H that is not positive definite) the answer is NaN, so ``qp_error`` is
     infinite.
+
+    Parameters
+    ----------
+    source : str
+        Generated C from CasADi.
+
+    Returns
+    -------
+    str
+        The patched source (unchanged when it calls neither qrqp nor DAQP).
     """
     patched = source
     if "casadi_qrqp" in source:
@@ -175,17 +244,42 @@ def accept_last_qp_iterate(source: str) -> str:
 
 
 def template(name: str) -> str:
-    """The text of template ``name`` (a file in this package's ``templates/`` folder)."""
+    """The text of template ``name``.
+
+    Parameters
+    ----------
+    name : str
+        A file name in this package's ``templates/`` folder.
+
+    Returns
+    -------
+    str
+        The file's text.
+    """
     return resources.files("hystmpc.mpc.codegen").joinpath("templates", name).read_text(encoding="utf-8")
 
 
 def no_compiler_reason() -> str:
-    """Why :func:`c_compiler` found nothing, in a few words."""
+    """Why :func:`c_compiler` found nothing, in a few words.
+
+    Returns
+    -------
+    str
+        That ``CC`` is not an executable, or that there is no ``cc`` on the PATH.
+    """
     return f"CC={os.environ['CC']!r} is not an executable" if os.environ.get("CC") else "no cc on the PATH"
 
 
 def run(cmd: list[str], what: str) -> None:
-    """Run a build command; ``RuntimeError`` naming ``what`` with the end of its message on failure."""
+    """Run a build command; ``RuntimeError`` naming ``what`` with the end of its message on failure.
+
+    Parameters
+    ----------
+    cmd : list of str
+        The command and its arguments.
+    what : str
+        What the command does, for the error message.
+    """
     done = subprocess.run(cmd, capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f"{what} failed: {done.stderr.strip()[-1500:]}")

@@ -1,0 +1,191 @@
+"""Where an NMPC runs and where its inverse-model inputs come from, as its settings ask.
+
+:func:`assemble_nmpc` turns one way of building the Python controller into the controller
+the settings ask for:
+
+* ``nmpc.runtime``: ``python``; ``c``, the whole generated controller
+  (:mod:`hystmpc.mpc.codegen`), written, built once per distinct source into the cache and
+  driven through ``ctypes``; ``auto``, ``c`` where it can run, else ``python`` after a
+  one-line notice;
+* ``nmpc.inverse_plan``: ``static`` (the inverse models at rest), or ``linear-mpc``, the plan
+  of a linear MPC that the caller builds (a bench's ``inverse-lmpc``).
+
+:func:`validate_nmpc` is the check of these settings that runs before any work.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from hystmpc.mpc.codegen import CompiledController, Signals, build_cached, c_compiler, cache_dir, write_controller
+from hystmpc.mpc.codegen.toolchain import LOG, no_compiler_reason
+from hystmpc.mpc.embedded import NotGeneratable, controller_code
+from hystmpc.mpc.settings import NmpcSettings, SolverSettings
+
+RTI_SOLVERS = ("rti", "rti-c")
+"""The solvers the generated controller has (its RTI step)."""
+
+
+@dataclass(frozen=True)
+class CodeLabels:
+    """What the generated controller's header says about where it runs."""
+
+    signals: Signals
+    """Names and units of the signals."""
+    sample_period: float
+    """Seconds per sample."""
+    origin: str
+    """Where the controller comes from (a bench's name)."""
+    version: str
+    """The hystmpc version that wrote it."""
+
+
+def generated_settings(settings: NmpcSettings) -> NmpcSettings:
+    """``settings`` of the Python controller that is generated: the RTI step, run in Python.
+
+    Parameters
+    ----------
+    settings : NmpcSettings
+        The settings asked for.
+
+    Returns
+    -------
+    NmpcSettings
+        A copy with ``solver="rti"`` and ``runtime="python"``.
+    """
+    return replace(settings, solver="rti", runtime="python")
+
+
+def runs_generated(settings: NmpcSettings) -> bool:
+    """Whether the controller runs as its generated C: ``runtime=c``, or ``auto`` where it can.
+
+    With ``auto``, an RTI solver and a planned inverse, it gives a one-line notice (once).
+
+    Parameters
+    ----------
+    settings : NmpcSettings
+        The settings asked for.
+
+    Returns
+    -------
+    bool
+        True for ``runtime=c``, and for ``auto`` with an RTI solver and the static inverse.
+    """
+    if settings.runtime == "auto" and settings.solver in RTI_SOLVERS and settings.inverse_plan != "static":
+        _say_once(f"nmpc.runtime=auto: the controller runs in Python, since nmpc.inverse_plan="
+                  f"{settings.inverse_plan} has no generated form yet")
+        return False
+    return settings.runtime == "c" or (settings.runtime == "auto" and settings.solver in RTI_SOLVERS)
+
+
+def validate_nmpc(settings: NmpcSettings, solvers: SolverSettings | None = None) -> None:
+    """``ValueError`` for NMPC settings that cannot go together or cannot run here.
+
+    Cheap (no code is generated): the combinations of :meth:`NmpcSettings.check_combination`,
+    and ``runtime=c`` with a solver the generated controller lacks, a planned inverse or no
+    C compiler.
+
+    Parameters
+    ----------
+    settings : NmpcSettings
+        The settings to check.
+    solvers : SolverSettings, optional
+        The solver settings they go with (the configuration's ``solver`` group).
+    """
+    settings.check_combination(solvers)
+    if settings.runtime != "c":
+        return
+    if settings.solver not in RTI_SOLVERS:
+        raise ValueError(f"nmpc.runtime=c runs the generated controller, whose solver is the RTI step; nmpc.solver is "
+                         f"{settings.solver!r} (allowed with it: {', '.join(RTI_SOLVERS)}; or set nmpc.runtime=python "
+                         "or auto)")
+    if settings.inverse_plan != "static":
+        raise ValueError(f"nmpc.runtime=c runs the generated controller, whose inverse-model inputs come from the "
+                         f"static inverse; nmpc.inverse_plan is {settings.inverse_plan!r} (set "
+                         "nmpc.inverse_plan=static, or nmpc.runtime=python)")
+    if c_compiler() is None:
+        raise ValueError(f"nmpc.runtime=c needs a C compiler ({no_compiler_reason()}); set nmpc.runtime=python or auto")
+
+
+_SAID: set[str] = set()
+
+
+def _say_once(notice: str) -> None:
+    """A notice of ``nmpc.runtime=auto``, once per process (not once per scenario)."""
+    if notice not in _SAID:
+        _SAID.add(notice)
+        LOG.warning(notice)
+
+
+def assemble_nmpc(build: Callable[[NmpcSettings], object], settings: NmpcSettings, labels: CodeLabels,
+                  planner: Callable[[], object] | None = None):
+    """The NMPC as ``settings`` ask: in Python or as generated C, with or without a planner.
+
+    Parameters
+    ----------
+    build : callable
+        Builds the Python controller from NMPC settings (the other settings fixed).
+    settings : NmpcSettings
+        The settings asked for.
+    labels : CodeLabels
+        For the generated controller's header.
+    planner : callable, optional
+        Builds the linear MPC whose plan ``inverse_plan=linear-mpc`` takes; ``ValueError``
+        names its reason when it cannot.
+
+    Raises
+    ------
+    ValueError
+        Settings :func:`validate_nmpc` refuses, a controller ``runtime=c`` cannot generate,
+        or ``inverse_plan=linear-mpc`` without a ``planner``.
+
+    Returns
+    -------
+    Controller
+        The Python controller (with its planner attached for ``inverse_plan=linear-mpc``),
+        or a :class:`~hystmpc.mpc.codegen.CompiledController` around the generated C.
+    """
+    validate_nmpc(settings)
+    if runs_generated(settings):
+        return _compiled(build, settings, labels)
+    if settings.inverse_plan != "linear-mpc":
+        return build(settings)
+    if planner is None:
+        raise ValueError("nmpc.inverse_plan=linear-mpc takes the plan of a linear MPC, and there is none here; "
+                         "set nmpc.inverse_plan=static")
+    plan = planner()  # first: its checks come before the NMPC's build
+    plan.prepare_plan()
+    controller = build(settings)
+    controller.planner = plan
+    return controller
+
+
+def _compiled(build, settings: NmpcSettings, labels: CodeLabels):
+    """The whole generated controller, built once per distinct source into ``<cache>/controllers/``.
+
+    With ``runtime=auto``, no C compiler or a model that cannot be generated gives the
+    controller in Python instead, after a one-line notice.
+    """
+    def in_python():  # the user's solver, in Python
+        return build(replace(settings, runtime="python"))
+    if c_compiler() is None:  # runtime=auto: validate_nmpc refuses runtime=c without a compiler
+        _say_once(f"no C compiler ({no_compiler_reason()}): nmpc.runtime=auto runs the controller in Python, slower")
+        return in_python()
+    python = build(generated_settings(settings))
+    name = "controller"
+    with tempfile.TemporaryDirectory(prefix="hystmpc-controller-") as scratch:  # a cache hit writes nothing there
+        written = Path(scratch) / "c"
+        try:
+            code = controller_code(python, f"{name}_nmpc")
+        except NotGeneratable as exc:
+            if settings.runtime == "auto":
+                _say_once(f"{exc}: nmpc.runtime=auto runs the controller in Python")
+                return in_python()
+            raise ValueError(f"nmpc.runtime=c: {exc}; or set nmpc.runtime=python or auto") from None
+        write_controller(code, written, name, labels.signals, labels.sample_period, labels.origin, labels.version,
+                         build=False)
+        library = build_cached(written, name, cache_dir() / "controllers", f"nmpc.runtime={settings.runtime}")
+    return CompiledController(library, name, python)
