@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import datetime as dt
 import json
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -183,10 +184,9 @@ def write_run_csv(run: RunResult, folder: str | Path) -> Path:
     with path.open("w", newline="") as fh:
         writer = csv.writer(fh)
         writer.writerow(["t", "reference", "output", "input", "predicted", *(f"true_{k}" for k in extra)])
-        for k in range(len(run.t)):
-            row = [run.t[k], run.reference[k], run.output[k], run.input[k], run.predicted[k],
-                   *(run.truth[key][k] for key in extra)]
-            writer.writerow(["" if not np.isfinite(v) else f"{v:.9g}" for v in row])
+        columns = [run.t, run.reference, run.output, run.input, run.predicted, *(run.truth[key] for key in extra)]
+        for row in zip(*(np.asarray(c, float).tolist() for c in columns), strict=True):  # floats: ~10 × faster
+            writer.writerow(["" if not math.isfinite(v) else f"{v:.9g}" for v in row])
     return path
 
 

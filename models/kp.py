@@ -35,7 +35,8 @@ def ridge(tau, delta: float):
     ndarray
         φ(τ), in [−1, 1].
     """
-    return np.clip(-1.0 + 2.0 * np.asarray(tau, float) / delta, -1.0, 1.0)
+    # np.clip's own operations (max, then min; NaN kept) without its Python wrappers: ~3 × faster
+    return np.minimum(np.maximum(-1.0 + 2.0 * np.asarray(tau, float) / delta, -1.0), 1.0)
 
 
 def paper_density(rho1, rho2, c: float = 2.0, sigma: float = 1.0, scale: float = 0.004):
@@ -184,7 +185,10 @@ class KrasnoselskiiPokrovskii(SteppedModel):
             rising = builtin_max(xi, clip(-1.0 + 2.0 * (u - ca.DM(self.rho2)) / self.delta, -1.0, 1.0))
             falling = builtin_min(xi, clip(-1.0 + 2.0 * (u - ca.DM(self.rho1)) / self.delta, -1.0, 1.0))
             return ca.if_else(u > u_last, rising, ca.if_else(u < u_last, falling, xi))
-        u_last, xi = float(state[0]), np.asarray(state[1:], float)
+        return self._kernels_after(float(state[0]), np.asarray(state[1:], float), u)
+
+    def _kernels_after(self, u_last: float, xi: np.ndarray, u: float) -> np.ndarray:
+        """ξ after the input moves from ``u_last`` to ``u`` (NumPy; ``xi`` is not changed)."""
         if u > u_last:
             return np.maximum(xi, ridge(u - self.rho2, self.delta))
         if u < u_last:
@@ -331,16 +335,24 @@ class KrasnoselskiiPokrovskii(SteppedModel):
             return self.bisection_inverse(state, y_target, u_min, u_max)
         if not np.isfinite(y_target):
             raise ValueError(f"y_target must be finite, got {y_target}")
-        u_last = float(np.clip(state[0], u_min, u_max))
-        y_now = self.step(state, u_last, weights)[1]
+        # The outputs of step(state, u, weights), without building a state for every trial input
+        start, xi = float(state[0]), np.asarray(state[1:], float)
+        density = self.weights if weights is None else weights
+
+        def output(u: float) -> float:
+            return float(density @ self._kernels_after(start, xi, u))
+        u_last = min(max(start, u_min), u_max)  # np.clip of a float
+        if not np.isfinite(u_last):
+            raise ValueError(f"u must be finite, got {u_last}")
+        y_now = output(u_last)
         sign = 1.0 if y_target > y_now else -1.0
         bound = u_max if sign > 0 else u_min
         reached = (lambda y: y >= y_target) if sign > 0 else (lambda y: y <= y_target)
         lo = u_last
         u = u_last
         while True:
-            u = float(np.clip(u + sign * step, u_min, u_max))
-            if reached(self.step(state, u, weights)[1]):
+            u = min(max(u + sign * step, u_min), u_max)
+            if reached(output(u)):
                 break
             lo = u
             if u == bound:
@@ -348,7 +360,7 @@ class KrasnoselskiiPokrovskii(SteppedModel):
         hi = u
         for _ in range(30):  # bisection within the last ζ step
             mid = 0.5 * (lo + hi)
-            if reached(self.step(state, mid, weights)[1]):
+            if reached(output(mid)):
                 hi = mid
             else:
                 lo = mid

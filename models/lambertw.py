@@ -10,6 +10,8 @@ derivative W'(x) = W / (x (1 + W)) as well.
 
 from __future__ import annotations
 
+import math
+
 import casadi as ca
 import numpy as np
 
@@ -73,6 +75,33 @@ def lambertw_function() -> ca.Function:
     return ca.Function("lambertw", [x], [lambertw_expr(x)], ["x"], ["w"])
 
 
+def _lambertw_scalar(x: float) -> float:
+    """:func:`lambertw` of one float with ``math``, ~20 × faster than on a 0-d array.
+
+    The same operations in the same order, so the same double where ``math`` and NumPy share
+    the C library's exp, log and pow. Raises ArithmeticError where NumPy would return inf or NaN.
+    """
+    if x == 0.0:
+        return 0.0
+    if x < -0.25:
+        t = math.e * x + 1.0
+        p = math.sqrt(2.0 * t) if t > 0 else 0.0
+        w = -1.0 + p - p * p / 3.0 + 11.0 / 72.0 * p**3
+    elif x < 20.0:
+        lx = math.log(1.0 + max(x, -0.3))
+        w = lx * (1.0 - math.log(1.0 + lx) / (2.0 + lx))
+    else:
+        l1 = math.log(x)
+        l2 = math.log(l1)
+        w = l1 - l2 + l2 / l1
+    for _ in range(HALLEY_STEPS):
+        ew = math.exp(w)
+        f = w * ew - x
+        wp1 = w + 1.0
+        w = w - f / (ew * wp1 - (w + 2.0) * f / (2.0 * wp1))
+    return w
+
+
 def lambertw(x):
     """W(x) on NumPy values with the same algorithm (real result, x >= -1/e).
 
@@ -83,9 +112,14 @@ def lambertw(x):
 
     Returns
     -------
-    ndarray
-        W(x), of the shape of ``x``.
+    float or ndarray
+        W(x): a float for a float ``x``, else an array of the shape of ``x``.
     """
+    if isinstance(x, float) and x >= -INV_E - 1e-15:  # np.float64 is a float too
+        try:
+            return _lambertw_scalar(x)
+        except ArithmeticError:  # W's branch point or an overflow: NumPy's inf/NaN rules below
+            pass
     x = np.asarray(x, float)
     if np.any(x < -INV_E - 1e-15):
         raise ValueError(f"Lambert W (principal branch) needs x >= -1/e, got min {x.min()}")

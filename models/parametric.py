@@ -15,6 +15,7 @@ correspond. State: ``[u_last, s, u0, v0, v_last]``.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import casadi as ca
@@ -83,12 +84,16 @@ class ParametricHysteresis(SteppedModel):
 
     @staticmethod
     def _update_memory(state, u):
-        if symbolic(state) or symbolic(u):  # the same tests as if_else
-            u_last, s, u0, v0, v_last = (state[i] for i in range(5))
-            direction = ca.if_else(u > u_last, 1.0, -1.0)
-            turned = ca.logic_and(u != u_last, direction != s)  # u_last was an extremum (Definition 3.1)
-            return ca.if_else(turned, direction, s), ca.if_else(turned, u_last, u0), ca.if_else(turned, v_last, v0)
-        u_last, s, u0, v0, v_last = (float(v) for v in state)
+        """``(s, u0, v0)`` after input ``u``; CasADi expressions (the same tests as if_else)."""
+        u_last, s, u0, v0, v_last = (state[i] for i in range(5))
+        direction = ca.if_else(u > u_last, 1.0, -1.0)
+        turned = ca.logic_and(u != u_last, direction != s)  # u_last was an extremum (Definition 3.1)
+        return ca.if_else(turned, direction, s), ca.if_else(turned, u_last, u0), ca.if_else(turned, v_last, v0)
+
+    @staticmethod
+    def _memory_after(state: list[float], u: float) -> tuple[float, float, float]:
+        """``(s, u0, v0)`` after input ``u`` from a state of floats (see :func:`_floats`)."""
+        u_last, s, u0, v0, v_last = state
         if u != u_last:
             direction = 1.0 if u > u_last else -1.0
             if direction != s:  # u_last was an extremum (Definition 3.1)
@@ -112,6 +117,14 @@ class ParametricHysteresis(SteppedModel):
         float, ndarray or CasADi expression
             H's output.
         """
+        if type(u) is float and type(s) is float and type(u0) is float and type(v0) is float:
+            m = self.p1 + s * (v0 - u0)  # one sample of a simulation: math, not 0-d arrays
+            try:
+                exponential = math.exp(self.p2 * (m - abs(u - u0)))
+            except OverflowError:  # NumPy's inf, below
+                pass
+            else:
+                return u - u0 + v0 + s * (lambertw(self.p2 * m * exponential) / self.p2 - m)
         lib = ca if isinstance(u, (ca.SX, ca.MX)) else np
         w = lambertw_expr if lib is ca else lambertw
         m = self.p1 + s * (v0 - u0)
@@ -135,6 +148,9 @@ class ParametricHysteresis(SteppedModel):
         float, ndarray or CasADi expression
             IH's output (H's input).
         """
+        if type(u) is float and type(s) is float and type(u0) is float and type(v0) is float:
+            m = self.p1 + s * (u0 - v0)  # math.exp cannot overflow here: its argument is <= 0
+            return u - u0 + v0 + s * m * (1 - math.exp(-self.p2 * abs(u - u0)))
         lib = ca if isinstance(u, (ca.SX, ca.MX)) else np
         m = self.p1 + s * (u0 - v0)
         du = lib.fabs(u - u0) if lib is ca else abs(u - u0)
@@ -159,12 +175,14 @@ class ParametricHysteresis(SteppedModel):
         v : float or CasADi expression
             Output after the step.
         """
+        if not (symbolic(state) or symbolic(u)):  # a simulation's sample
+            u = float(u)
+            s, u0, v0 = self._memory_after(_floats(state), u)
+            v = float(self.direct(u, s, u0, v0))
+            return np.array([u, s, u0, v0, v]), v
         s, u0, v0 = self._update_memory(state, u)
-        if symbolic(s):
-            v = self.direct(u if symbolic(u) else type(s)(u), s, u0, v0)
-            return ca.vertcat(u, s, u0, v0, v), v
-        v = float(self.direct(u, s, u0, v0))
-        return np.array([u, s, u0, v0, v]), v
+        v = self.direct(u if symbolic(u) else type(s)(u), s, u0, v0)
+        return ca.vertcat(u, s, u0, v0, v), v
 
     def inverse_step(self, state, v_target: float) -> tuple[np.ndarray, float]:
         """IH: the input that makes H's output ``v_target`` from ``state``; returns ``(state, u)``.
@@ -194,9 +212,9 @@ class ParametricHysteresis(SteppedModel):
             return self.step(state, u)[0], u
         if not np.isfinite(v_target):
             raise ValueError(f"v_target must be finite, got {v_target}")
-        u_last, s, u0, v0, v_last = (float(x) for x in state)
-        inv_state = np.array([v_last, s, v0, u0, u_last])  # IH's view: input v, output u
-        s_i, v0_i, u0_i = self._update_memory(inv_state, v_target)
+        v_target = float(v_target)
+        u_last, s, u0, v0, v_last = _floats(state)
+        s_i, v0_i, u0_i = self._memory_after([v_last, s, v0, u0, u_last], v_target)  # IH's view: input v, output u
         u = float(self.inverse(v_target, s_i, v0_i, u0_i))
         return self.step(state, u)[0], u
 
@@ -269,6 +287,11 @@ class ParametricHysteresis(SteppedModel):
             v = u - u0_new + v0_new + s_new * (lambertw_expr(self.p2 * m * ca.exp(self.p2 * (m - du))) / self.p2 - m)
             return ca.vertcat(u, s_new, u0_new, v0_new, v), v
         return smooth_function("parametric_smooth", 5, expressions)
+
+
+def _floats(state) -> list[float]:
+    """A NumPy state as Python floats: the exact step's arithmetic then runs on ``math``."""
+    return state.tolist() if isinstance(state, np.ndarray) else [float(x) for x in state]
 
 
 def major_loop(op: ParametricHysteresis, current) -> np.ndarray:

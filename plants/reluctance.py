@@ -15,6 +15,7 @@ first-order lag with a slew limit; 5 kHz sampling.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -86,9 +87,13 @@ def static_force(p: ReluctanceParams, i_eff, gap: float):
 
     Returns
     -------
-    ndarray
-        Force (N), of the shape of ``i_eff``.
+    float or ndarray
+        Force (N): a float for a float ``i_eff``, else of the shape of ``i_eff``.
     """
+    if isinstance(i_eff, float):  # one sample: Python floats, the same operations
+        phi_lin = MU0 * p.area * p.turns * i_eff / (2 * gap + p.path_length / p.mu_r)
+        phi = phi_lin / (1 + (phi_lin / (p.b_sat * p.area)) ** 4) ** 0.25
+        return (1 - p.leakage * gap / 1e-3) ** 2 * phi**2 / (MU0 * p.area)  # pow, as NumPy's float64 does
     phi_lin = MU0 * p.area * p.turns * np.asarray(i_eff, float) / (2 * gap + p.path_length / p.mu_r)
     phi_sat = p.b_sat * p.area
     phi = phi_lin / (1 + (phi_lin / phi_sat) ** 4) ** 0.25
@@ -146,14 +151,14 @@ class ReluctanceActuator(ParametrisedPlant):
         if not np.isfinite(current_ref):
             raise ValueError(f"plant input must be finite, got {current_ref}")
         p = self.params
-        ref = float(np.clip(current_ref, -p.current_limit, p.current_limit))
+        ref = min(max(float(current_ref), -p.current_limit), p.current_limit)  # np.clip of a float, faster
         h = p.sample_period / p.substeps
         # Exact first-order step (explicit Euler would overshoot: ω h = 1.9 here, and every
         # overshoot is a reversal that resets the hysteresis memory), then the slew limit.
-        approach = 1.0 - np.exp(-2 * np.pi * p.amplifier_bandwidth * h)
+        approach = 1.0 - math.exp(-2 * np.pi * p.amplifier_bandwidth * h)
         for _ in range(p.substeps):
             delta = (ref - self._current) * approach
-            self._current += float(np.clip(delta, -p.slew_limit * h, p.slew_limit * h))
+            self._current += min(max(delta, -p.slew_limit * h), p.slew_limit * h)
             self._hys, _ = self.hysteresis.step(self._hys, self._current)
         return self._measure()
 

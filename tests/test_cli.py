@@ -1,6 +1,7 @@
 """CLI: error cases exit 2 with one line naming the problem; a short run writes a valid document."""
 
 import json
+import os
 import subprocess
 import sys
 
@@ -49,6 +50,8 @@ def _csv(tmp_path, text, name="ref.csv"):
     (["run", "pam", "square-10", "--controller", "pi", "--duration", "-1"],
      "--duration must be a finite number of seconds > 0"),
     (["run", "pam", "square-10"], "--controller"),
+    (["compare", "pam", "--workers", "0"], "--workers must be >= 1, got 0"),
+    (["compare", "pam", "--workers", "2", "--plant", "my_rig:heavy"], "--plant's plant is one"),
     (["frobnicate", "pam"], "invalid choice: 'frobnicate'"),
 ])
 def test_bad_usage_exits_2_with_one_line(capsys, argv, needle):
@@ -139,3 +142,28 @@ def test_module_entry_point_exit_code():
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == [
         "hystmpc: error: unknown scenario 'nosuch'; allowed: square-10, square-20, square-30, square-40, sine-30"]
+
+
+def test_compare_on_two_processes_gives_the_runs_of_one(capsys, tmp_path):
+    """Every run is seeded and self-contained: the same metrics, CSVs and order on 2 processes
+    as on 1, with a reference file and an actuator setting as well."""
+    path = _csv(tmp_path, "t,ref\n0,0\n0.2,10\n0.3,-5\n")
+    common = ["compare", "pam", "square-10", "--controllers", "pi,nmpc", "--duration", "0.3", "--no-plots",
+              "--quiet", "--set", "pi.kp=0.07", "--reference", path]
+    docs = {}
+    for workers in ("1", "2"):
+        code, _, err = _run(capsys, common + ["--workers", workers, "--out", str(tmp_path / workers),
+                                              "--json", str(tmp_path / f"{workers}.json")])
+        assert code == 0, err
+        docs[workers] = json.loads((tmp_path / f"{workers}.json").read_text())
+    one, two = ([(r["scenario"], r["controller"], r["metrics"]) for r in docs[w]["runs"]] for w in ("1", "2"))
+    assert one == two and [c for _, c, _ in one] == ["pi", "nmpc"]
+    for name in ("ref__pi.csv", "ref__nmpc.csv"):
+        assert (tmp_path / "1" / "runs" / name).read_text() == (tmp_path / "2" / "runs" / name).read_text()
+
+
+def test_default_workers_start_processes_only_for_long_work():
+    from hystmpc.experiments.cli.workers import MIN_SAMPLES_PER_WORKER, default_workers
+    assert default_workers(MIN_SAMPLES_PER_WORKER - 1, 8) == 1  # a short compare: no process to start
+    assert default_workers(100 * MIN_SAMPLES_PER_WORKER, 1) == 1  # one run
+    assert 1 <= default_workers(100 * MIN_SAMPLES_PER_WORKER, 8) <= min(8, os.cpu_count() or 1)

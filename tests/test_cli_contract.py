@@ -210,14 +210,14 @@ def test_version(capsys):
 
 def test_a_reference_file_keeps_the_named_scenarios_conditions(tmp_path):
     from hystmpc.experiments.benches import get_bench
-    from hystmpc.experiments.cli.run import _scenario
+    from hystmpc.experiments.cli.common import scenario_to_run
     bench = get_bench("reluctance")
     named = bench.scenarios["ramp-1.2mm"]
     assert named.conditions  # the gap it runs at
     ref = tmp_path / "ref.csv"
     ref.write_text("t,force\n0,1\n0.01,1.5\n")
-    assert _scenario(bench, "ramp-1.2mm", str(ref)).conditions == named.conditions
-    assert _scenario(bench, None, str(ref)).conditions == ()
+    assert scenario_to_run(bench, "ramp-1.2mm", str(ref)).conditions == named.conditions
+    assert scenario_to_run(bench, None, str(ref)).conditions == ()
 
 
 def test_identify_refuses_a_folder_as_its_model_file(capsys, tmp_path):

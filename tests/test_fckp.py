@@ -49,6 +49,42 @@ def test_kp_model_output_is_bounded_and_has_memory():
     assert abs(after_peak) <= kp.total_weight
 
 
+def _search_inverse_by_steps(kp, state, y_target, step=0.01, weights=None):
+    """The implicit inverse written on whole ``step`` calls (the search of Section 3.2)."""
+    u_last = float(np.clip(state[0], -1.0, 1.0))
+    sign = 1.0 if y_target > kp.step(state, u_last, weights)[1] else -1.0
+    reached = (lambda y: y >= y_target) if sign > 0 else (lambda y: y <= y_target)
+    lo = u = u_last
+    while True:
+        u = float(np.clip(u + sign * step, -1.0, 1.0))
+        if reached(kp.step(state, u, weights)[1]):
+            break
+        lo = u
+        if u == (1.0 if sign > 0 else -1.0):
+            return u
+    hi = u
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        hi, lo = (mid, lo) if reached(kp.step(state, mid, weights)[1]) else (hi, mid)
+    return hi
+
+
+def test_kp_inverse_is_the_search_on_whole_steps_to_the_bit():
+    """inverse_step evaluates trial inputs without building states: the same input to the bit,
+    with the model's density and with a replaced one, beyond the range included."""
+    kp = Fckp().kp
+    rng = np.random.default_rng(6)
+    state = kp.initial_state(-1.0)
+    other = kp.weights * rng.uniform(0.5, 1.5, len(kp.weights))
+    for _ in range(200):
+        target = float(rng.uniform(-1.1, 1.1) * kp.total_weight)
+        weights = other if rng.uniform() < 0.3 else None
+        new_state, u = kp.inverse_step(state, target, weights=weights)
+        assert u == _search_inverse_by_steps(kp, state, target, weights=weights)
+        assert np.array_equal(new_state, kp.step(state, u)[0])
+        state = new_state
+
+
 def test_threshold_grid_respects_span_and_slope():
     r1, r2 = threshold_grid(12, 0.15, 2)
     assert len(r1) == 11 + 10

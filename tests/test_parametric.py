@@ -48,6 +48,38 @@ def test_lambertw_derivative_matches_closed_form():
     assert np.max(rel[x > -INV_E + 1e-3]) <= 1e-12
 
 
+def test_lambertw_of_one_float_is_the_array_algorithm():
+    """The ``math`` path a simulation takes per sample does the array path's operations: equal
+    to 2 ulp (exactly where NumPy and ``math`` share the C library's exp and log); the branch
+    point, where Halley divides by zero, falls back to the array rules."""
+    x = np.concatenate((_grid(), np.random.default_rng(5).uniform(-INV_E, 50.0, 20000), [-INV_E, -0.25, 20.0]))
+    whole = lambertw(x)
+    one_by_one = np.array([lambertw(float(v)) for v in x])
+    assert all(isinstance(lambertw(float(v)), float) for v in x[:5])
+    finite = np.isfinite(whole)
+    np.testing.assert_array_equal(np.isfinite(one_by_one), finite)
+    np.testing.assert_array_max_ulp(one_by_one[finite], whole[finite], maxulp=2)
+
+
+def test_operator_steps_of_floats_match_array_evaluation():
+    """``step``/``inverse_step`` on floats (the plant's per-sample path) agree with ``direct`` and
+    ``inverse`` evaluated on arrays of the same memories, and keep IH[H] = identity."""
+    state = E_CORE.initial_state(0.0)
+    inputs = 5.0 * np.sin(np.linspace(0.0, 9.0, 800)) + np.linspace(0.0, 2.0, 800)
+    memories, outputs = [], []
+    for u in inputs:
+        state, v = E_CORE.step(state, u)
+        assert isinstance(v, float)
+        memories.append(state[1:4])
+        outputs.append(v)
+    s, u0, v0 = np.array(memories).T
+    np.testing.assert_array_max_ulp(np.array(outputs), E_CORE.direct(inputs, s, u0, v0), maxulp=4)
+    state = E_CORE.initial_state(0.0)
+    for v in outputs[:300]:
+        state, u = E_CORE.inverse_step(state, v)
+        assert state[4] == pytest.approx(v, abs=1e-12)
+
+
 def test_lambertw_rejects_out_of_domain():
     with pytest.raises(ValueError, match="x >= -1/e"):
         lambertw(-0.5)

@@ -60,3 +60,28 @@ def test_plant_rejects_bad_input():
         ReluctanceActuator(ReluctanceParams(), 5e-3)
     with pytest.raises(ValueError, match="finite"):
         ReluctanceActuator().step(float("nan"))
+
+
+def test_force_and_polynomial_features_of_one_float_match_arrays():
+    """The per-sample float paths (plant force, polynomial inverse) agree with the array paths
+    to 2 ulp (they are bit-identical where NumPy and ``math`` share the C library's pow)."""
+    from hystmpc.models.reluctance import poly_features
+    currents = np.random.default_rng(2).uniform(-25.0, 25.0, 3000)
+    for params, gap in ((ReluctanceParams(), 1.2e-3), (C_CORE, 1.75e-3)):
+        one_by_one = np.array([static_force(params, float(i), gap) for i in currents])
+        np.testing.assert_array_max_ulp(one_by_one, static_force(params, currents, gap), maxulp=2)
+    forces = np.concatenate(([0.0, -3.0], np.random.default_rng(3).uniform(0.0, 450.0, 3000)))
+    one_by_one = np.array([poly_features(float(f), 1.5e-3) for f in forces])
+    np.testing.assert_array_max_ulp(one_by_one, poly_features(forces, 1.5e-3), maxulp=2)
+
+
+def test_interp_of_one_float_is_numpys():
+    """Pure IEEE arithmetic on the same operands: equal to np.interp to the bit, ends, table
+    points and NaN included."""
+    from hystmpc.models.reluctance import interp_float
+    rng = np.random.default_rng(4)
+    xp = np.cumsum(rng.uniform(0.01, 1.0, 60))
+    fp = np.sin(xp) * 100.0
+    x = np.concatenate((rng.uniform(xp[0] - 1.0, xp[-1] + 1.0, 20000), xp, [np.nan, xp[0], xp[-1]]))
+    one_by_one = np.array([interp_float(float(v), xp.tolist(), fp.tolist()) for v in x])
+    np.testing.assert_array_equal(one_by_one, np.interp(x, xp, fp))

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import datetime as dt
 import json
 import logging
@@ -19,6 +20,7 @@ from pathlib import Path
 from hystmpc.experiments.bench import Bench
 from hystmpc.experiments.benches import BENCH_NAMES, get_bench
 from hystmpc.experiments.limits import check_horizons, check_run_samples, run_samples
+from hystmpc.experiments.reference import load_reference
 from hystmpc.experiments.report import write_json
 from hystmpc.models.identification import FAMILIES
 
@@ -388,3 +390,35 @@ def configured(bench: Bench, overrides: list[str], tuned: bool = True):
         return bench.configure(overrides, tuned)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+
+
+def scenario_to_run(bench: Bench, name: str | None, reference: str | None):
+    """Scenario ``name``, or the ``reference`` file's trajectory.
+
+    The trajectory runs under the conditions of scenario ``name``, if one is named.
+
+    Parameters
+    ----------
+    bench : Bench
+        The bench.
+    name : str or None
+        One of its scenarios (checked before), or None with ``reference``.
+    reference : str or None
+        A reference CSV (``--reference``), or None.
+
+    Returns
+    -------
+    Scenario
+        The scenario to run; ``UsageError`` for a reference file that cannot be read.
+    """
+    if reference is None:
+        return bench.scenarios[name]
+    try:
+        loaded = load_reference(reference, bench)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    if name is None:
+        return loaded
+    named = bench.scenarios[name]
+    return dataclasses.replace(loaded, description=f"{loaded.description}, conditions of {name}",
+                               conditions=named.conditions)

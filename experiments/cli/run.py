@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import dataclasses
 import logging
 import sys
 from pathlib import Path
@@ -33,12 +32,13 @@ from hystmpc.experiments.cli.common import (
     configured,
     output_folder,
     report_solver_log,
+    scenario_to_run,
     solver_log,
     timestamped,
     work_config,
     write_json_target,
 )
-from hystmpc.experiments.reference import load_reference
+from hystmpc.experiments.limits import run_samples
 from hystmpc.experiments.report import comparison_table, results_document, write_json, write_run_csv
 from hystmpc.experiments.runner import RunResult
 
@@ -78,6 +78,8 @@ def add_parsers(sub) -> None:
     p_cmp.add_argument("bench", nargs="?", default=DEFAULT_BENCH, help=BENCH_HELP)
     p_cmp.add_argument("scenarios", nargs="*", help="default: all of the bench's scenarios")
     p_cmp.add_argument("--controllers", help="comma-separated (default: all of the bench's)")
+    p_cmp.add_argument("--workers", type=int, help="processes running the runs at once (default: one per core, "
+                       "fewer for short work; 1 with --plant)")
     _add_run_options(p_cmp)
     p_cmp.set_defaults(handler=compare_command)
 
@@ -130,27 +132,15 @@ def compare_command(args) -> int:
     return _execute(args, bench, scenarios, controllers)
 
 
-def _scenario(bench: Bench, name: str | None, reference: str | None):
-    """Scenario ``name``, or the ``reference`` file's trajectory.
-
-    The trajectory runs under the conditions of scenario ``name``, if one is named.
-    """
-    if reference is None:
-        return bench.scenarios[name]
-    try:
-        loaded = load_reference(reference, bench)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
-    if name is None:
-        return loaded
-    named = bench.scenarios[name]
-    return dataclasses.replace(loaded, description=f"{loaded.description}, conditions of {name}",
-                               conditions=named.conditions)
-
-
 def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[str]) -> int:
     check_duration(args.duration)
     check_seed(args.seed)
+    workers = getattr(args, "workers", None)
+    if workers is not None and workers < 1:
+        raise UsageError(f"--workers must be >= 1, got {workers}")
+    if workers is not None and workers > 1 and args.plant is not None:
+        raise UsageError(f"--workers {workers} runs copies of the bench's plant at once; --plant's plant is "
+                         "one (a rig, your simulator): drop --workers")
     if args.reference is not None and len(scenario_names) > 1:
         raise UsageError("--reference replaces one scenario's reference: name one scenario at most")
     # checked before the baselines are tuned (an actuator file's first run tunes them for seconds to minutes)
@@ -160,9 +150,9 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     if args.reference is not None and not scenario_names:
-        scenarios = [_scenario(bench, None, args.reference)]
+        scenarios = [scenario_to_run(bench, None, args.reference)]
     else:
-        scenarios = [_scenario(bench, s, args.reference) for s in scenario_names]
+        scenarios = [scenario_to_run(bench, s, args.reference) for s in scenario_names]
     user_keys = {o.split("=", 1)[0].strip() for o in args.overrides}
     for scenario in scenarios:
         for condition in scenario.conditions:
@@ -188,7 +178,7 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
         own_plant = _own_plant(args, bench, config)  # last of the checks: it may open hardware
         if any(c != "nmpc" for c in controllers):
             config = configured(bench, args.overrides)
-        runs = _run_all(args, bench, config, scenarios, controllers, out, total, own_plant)
+        runs = _run_all(args, bench, config, scenarios, controllers, out, total, own_plant, scenario_names)
     doc = results_document(bench.name, runs, command=sys.argv[1:] if sys.argv else None)
     write_json(doc, out / "results.json")
     write_json_target(doc, json_target)
@@ -283,11 +273,34 @@ def _naming_own_plant(plant, spec: str | None, scenario, controller: str):
 
 
 def _run_all(args, bench: Bench, config, scenarios, controllers, out: Path, total: int,
-             own_plant=None) -> list[RunResult]:
-    runs: list[RunResult] = []
+             own_plant=None, scenario_names=()) -> list[RunResult]:
     from tqdm import tqdm
+
+    from hystmpc.experiments.cli.workers import CompareRun, default_workers, run_in_parallel
+    workers = getattr(args, "workers", None)
+    if workers is None:
+        workers = 1 if own_plant is not None else default_workers(total, len(scenarios) * len(controllers))
+    runs: list[RunResult] = []
     with tqdm(total=total, unit="step", disable=True if args.quiet else None, leave=False,
               dynamic_ncols=True) as bar:
+        if workers > 1:
+            bar.set_description(f"{len(scenarios) * len(controllers)} runs on {workers} processes")
+            level = logging.getLogger("hystmpc").getEffectiveLevel()
+            tasks = [CompareRun(args.bench, tuple(args.overrides), any(c != "nmpc" for c in controllers), name,
+                                args.reference, controller, args.seed, args.duration, level)
+                     for name in (scenario_names or [None]) for controller in controllers]
+
+            def done(run: RunResult, printed: str) -> None:
+                if printed:
+                    with open(out / "solver.log", "a") as log:
+                        log.write(printed)
+                write_run_csv(run, out)
+                bar.update(len(run.t))
+            # Longest first: the scenarios with the most samples, and on each the controllers listed
+            # last (a bench lists its baselines first and the NMPC last) before those listed first
+            samples = [run_samples(args.duration or s.duration, bench.sample_period, s.name) for s in scenarios]
+            first = sorted(range(len(tasks)), key=lambda i: (-samples[i // len(controllers)], -(i % len(controllers))))
+            return run_in_parallel(tasks, workers, done, first)
         for scenario in scenarios:
             for controller in controllers:
                 bar.set_description(f"{scenario.name} · {controller}")
