@@ -335,6 +335,9 @@ class KrasnoselskiiPokrovskii(SteppedModel):
             return self.bisection_inverse(state, y_target, u_min, u_max)
         if not np.isfinite(y_target):
             raise ValueError(f"y_target must be finite, got {y_target}")
+        if not (np.isfinite(u_min) and np.isfinite(u_max) and np.isfinite(step) and step > 0):
+            raise ValueError(f"u_min, u_max and step must be finite (step > 0), got {u_min}, {u_max}, {step}")
+        u_min, u_max = float(u_min), float(u_max)
         # The outputs of step(state, u, weights), without building a state for every trial input
         start, xi = float(state[0]), np.asarray(state[1:], float)
         density = self.weights if weights is None else weights

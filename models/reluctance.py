@@ -51,6 +51,8 @@ class ReluctanceModel:
         weight : float
             Weight of ``upper`` in [0, 1] (0 outside the identified range).
         """
+        if not np.isfinite(gap):
+            raise ValueError(f"gap must be finite, got {gap}")
         gaps = [float(g) for g in self.gaps]
         if gap <= gaps[0]:
             return 0, 0, 0.0
@@ -267,8 +269,11 @@ def poly_features(force, gap):
         The 15 features on a new last axis, ordered by a, then b.
     """
     if isinstance(force, float) and isinstance(gap, float):  # one sample: Python floats, ~20 × faster
-        root, g = math.sqrt(max(force, 0.0)), gap / 1e-3
-        return np.array([_power(root, a) * _power(g, b) for a in range(5) for b in range(5 - a)])
+        root, g = math.sqrt(max(float(force), 0.0)), float(gap) / 1e-3
+        try:
+            return np.array([_power(root, a) * _power(g, b) for a in range(5) for b in range(5 - a)])
+        except OverflowError:  # NumPy's inf, below
+            pass
     root = np.sqrt(np.maximum(np.asarray(force, float), 0.0))
     g = np.broadcast_to(np.asarray(gap, float) / 1e-3, root.shape)
     return np.stack([root**a * g**b for a in range(5) for b in range(5 - a)], axis=-1)

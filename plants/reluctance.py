@@ -91,9 +91,12 @@ def static_force(p: ReluctanceParams, i_eff, gap: float):
         Force (N): a float for a float ``i_eff``, else of the shape of ``i_eff``.
     """
     if isinstance(i_eff, float):  # one sample: Python floats, the same operations
-        phi_lin = MU0 * p.area * p.turns * i_eff / (2 * gap + p.path_length / p.mu_r)
-        phi = phi_lin / (1 + (phi_lin / (p.b_sat * p.area)) ** 4) ** 0.25
-        return (1 - p.leakage * gap / 1e-3) ** 2 * phi**2 / (MU0 * p.area)  # pow, as NumPy's float64 does
+        phi_lin = MU0 * p.area * p.turns * float(i_eff) / (2 * gap + p.path_length / p.mu_r)
+        try:
+            phi = phi_lin / (1 + (phi_lin / (p.b_sat * p.area)) ** 4) ** 0.25
+            return (1 - p.leakage * gap / 1e-3) ** 2 * phi**2 / (MU0 * p.area)  # pow, as NumPy's float64 does
+        except OverflowError:  # |i_eff| beyond 1e77: NumPy's inf and 0, below
+            pass
     phi_lin = MU0 * p.area * p.turns * np.asarray(i_eff, float) / (2 * gap + p.path_length / p.mu_r)
     phi_sat = p.b_sat * p.area
     phi = phi_lin / (1 + (phi_lin / phi_sat) ** 4) ** 0.25

@@ -169,3 +169,11 @@ def test_bad_parameters_are_rejected():
         KrasnoselskiiPokrovskii([0.0], [0.005], [1.0], 0.01)
     with pytest.raises(ValueError, match="finite"):
         Fckp().kp.step(Fckp().initial_state(), float("nan"))
+
+
+def test_kp_inverse_refuses_a_search_it_cannot_end():
+    kp = Fckp().kp
+    state = kp.initial_state(-1.0)
+    for kwargs in ({"step": float("nan")}, {"step": 0.0}, {"u_min": float("nan")}, {"u_max": float("inf")}):
+        with pytest.raises(ValueError, match="must be finite"):
+            kp.inverse_step(state, 0.5 * kp.total_weight, **kwargs)

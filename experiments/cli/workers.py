@@ -59,7 +59,21 @@ def default_workers(samples: int, runs: int) -> int:
     int
         At least 1.
     """
-    return max(1, min(os.cpu_count() or 1, runs, samples // MIN_SAMPLES_PER_WORKER))
+    return max(1, min(usable_cores(), runs, samples // MIN_SAMPLES_PER_WORKER))
+
+
+def usable_cores() -> int:
+    """Cores this process may run on (its affinity, which a container's CPU limit sets), else all.
+
+    Returns
+    -------
+    int
+        At least 1.
+    """
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # no affinity on this platform (macOS, Windows)
+        return os.cpu_count() or 1
 
 
 def _run_task(task: CompareRun) -> tuple[RunResult, str, list[logging.LogRecord]]:
@@ -80,11 +94,11 @@ def _run_task(task: CompareRun) -> tuple[RunResult, str, list[logging.LogRecord]
     bench = bench_named(task.bench)
     config = configured(bench, list(task.overrides), task.tuned)
     scenario = scenario_to_run(bench, task.scenario, task.reference)
-    with contextlib.redirect_stderr(printed):
-        try:
-            prepared = bench.prepare(scenario, task.controller, config)
-        except ValueError as exc:  # a setting the controller or plant cannot take (as without workers)
-            raise UsageError(str(exc)) from None
+    try:
+        prepared = bench.prepare(scenario, task.controller, config)
+    except ValueError as exc:  # a setting the controller or plant cannot take (as without workers)
+        raise UsageError(str(exc)) from None
+    with contextlib.redirect_stderr(printed):  # as solver_log does on one process
         run = bench.run(scenario, task.controller, seed=task.seed, duration=task.duration, prepared=prepared)
     for record in records:  # a record's arguments may not pickle: keep the text only
         record.msg, record.args, record.exc_info = record.getMessage(), None, None
@@ -125,7 +139,7 @@ def run_in_parallel(tasks: list[CompareRun], workers: int, on_done, first=None) 
                 logger.handle(record)
             on_done(run, printed)
             results.append(run)
-    except BaseException:  # a failed run or Ctrl-C: no new runs, and no waiting for the running ones
+    except BaseException:  # a failed run or Ctrl-C: no new run starts (the running ones end with the command)
         pool.shutdown(wait=False, cancel_futures=True)
         raise
     pool.shutdown()
