@@ -7,6 +7,7 @@ through :func:`simulate`.
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -18,6 +19,13 @@ import numpy as np
 from hystmpc.experiments.metrics import input_metrics, oscillation_metrics, step_metrics, tracking_metrics
 from hystmpc.experiments.report import json_safe
 from hystmpc.plants.base import Measurement, Plant
+
+ESTIMATE_STEPS = 5
+"""Steps timed for the early work estimate (after the first, which may build or compile)."""
+SLOW_FACTOR = 10.0
+"""A run is announced as slow when its steps take this many periods or more..."""
+SLOW_SECONDS = 10.0
+"""... and the rest of it is expected to take this long or more (s)."""
 
 
 @runtime_checkable
@@ -297,6 +305,41 @@ def _checked(t: np.ndarray, ref: np.ndarray) -> np.ndarray:
     return ref
 
 
+def slow_run_notice(step_seconds, samples: int, sample_period: float) -> str | None:
+    """The expected time of a run whose first steps were slow, or None when it is not slow.
+
+    Slow: the median of ``step_seconds`` is :data:`SLOW_FACTOR` periods or more and the
+    ``samples`` still to run take :data:`SLOW_SECONDS` or more at that rate.
+
+    Parameters
+    ----------
+    step_seconds : array_like
+        Times of the steps measured so far (s).
+    samples : int
+        Steps still to run.
+    sample_period : float
+        Seconds per sample.
+
+    Returns
+    -------
+    str or None
+        One line: the step time, its ratio to the period and the time the rest will take.
+    """
+    per_step = float(np.median(step_seconds))
+    rest = per_step * samples
+    if per_step < SLOW_FACTOR * sample_period or rest < SLOW_SECONDS:
+        return None
+    return (f"{per_step * 1e3:.3g} ms per step over the first {len(step_seconds)}, "
+            f"{per_step / sample_period:.0f} × the {sample_period * 1e3:.3g} ms period: the remaining "
+            f"{samples:,} samples take about {_duration(rest)}")
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    return f"{seconds / 60:.0f} min" if seconds < 7200 else f"{seconds / 3600:.1f} h"
+
+
 def simulate(plant: Plant, controller: Controller, reference, duration: float | None = None, seed: int = 0, *,
              name: str | None = None, scenario: str | None = None, labels: Labels = Labels(),
              progress: Callable[[int], Any] | None = None, guard: InputGuard | None = None) -> RunResult:
@@ -354,6 +397,12 @@ def simulate(plant: Plant, controller: Controller, reference, duration: float | 
         start = time.perf_counter()
         u = controller.step(meas, ref_padded[k: k + horizon + 1])
         step_times[k] = time.perf_counter() - start
+        if k == ESTIMATE_STEPS:
+            notice = slow_run_notice(step_times[1: k + 1], n - k - 1, dt)
+            if notice:
+                label = scenario or getattr(reference, "name", "reference")
+                logging.getLogger("hystmpc").warning(f"slow run: {label} · {name or type(controller).__name__}: "
+                                                     f"{notice}")
         pred[k] = getattr(controller, "predicted_output", float("nan"))
         u, clipped, bad = guard.apply(float(u), last)
         clips += clipped

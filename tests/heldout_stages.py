@@ -11,6 +11,8 @@ level and an input range:
   smooth skewed density, two Kelvin–Voigt creep elements (0.5 s and 8 s) and a 2 ms lag;
 * ``BoucWenResonanceStage``: Bouc–Wen with exponent n = 1.5 and a 2-sample dead time driving a
   lightly damped 60 Hz mode (damping 0.06);
+* ``FastBoucWenStage``: a 2 kHz stage, Bouc–Wen (n = 1.2) with a 1-sample dead time driving
+  a 180 Hz mode (damping 0.08), for timing the controllers at a 0.5 ms period;
 * ``DuhemLagStage``: a saturating, asymmetric Coleman–Hodgdon (Duhem) loop, a 1-sample dead
   time and a 3 ms lag, on a bipolar input. Its ``g`` is below half the curve's largest slope:
   after a reversal the output first moves against the input (0.31 mm as the input falls 6 V
@@ -148,6 +150,21 @@ class BoucWenResonanceStage(_Stage):
         return self.pos
 
 
+class FastBoucWenStage(BoucWenResonanceStage):
+    """A 2 kHz stage: Bouc–Wen (n = 1.2), a 1-sample dead time, a 180 Hz mode."""
+
+    description = "held-out 2 kHz Bouc-Wen stage with a 180 Hz mode"
+    sample_period = 5e-4
+    noise = 0.004
+    input_range = (0.0, 100.0)
+    delay = 1
+
+    def __init__(self):
+        self.stiffness, self.a, self.beta, self.gamma, self.n = 0.12, 0.05, 0.012, 0.004, 1.2
+        self.frequency, self.damping = 180.0, 0.08
+        self.reset(0)
+
+
 class DuhemLagStage(_Stage):
     """Coleman–Hodgdon ``dy = α|du| (f(u) − y) + g du`` with ``f = 2.5 tanh((u − 5)/12) + 0.03 u``,
     a 1-sample dead time and a 3 ms lag; bipolar input in V, output in mm."""
@@ -197,6 +214,7 @@ class DuhemMonotoneStage(DuhemLagStage):
 
 
 STAGES = {"preisach-creep": PreisachCreepStage, "bouc-wen-resonance": BoucWenResonanceStage,
+          "fast-bouc-wen": FastBoucWenStage,
           "duhem-lag": DuhemLagStage, "duhem-monotone-lag": DuhemMonotoneStage}
 
 
@@ -208,6 +226,11 @@ def make_preisach_creep():
 def make_bouc_wen_resonance():
     """``--plant heldout_stages:make_bouc_wen_resonance``."""
     return BoucWenResonanceStage()
+
+
+def make_fast_bouc_wen():
+    """``--plant heldout_stages:make_fast_bouc_wen``."""
+    return FastBoucWenStage()
 
 
 def make_duhem_lag():

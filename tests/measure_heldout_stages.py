@@ -21,9 +21,11 @@ from heldout_stages import STAGES
 from heldout_truths import excitation
 from scipy.signal import butter, sosfiltfilt
 
-SETTINGS = {  # stage: (identify options, output range, units): what a user would choose, knowing the kind
+SETTINGS = {  # stage: (identify options, output range, units): what a user would choose, knowing the kind;
+    # "{steps}" stands for a record of steps written for the stage (a record that shows its resonance)
     "preisach-creep": (["--dynamics", "first-order", "--creep"], (0.0, 12.0), "um"),
     "bouc-wen-resonance": (["--dynamics", "second-order"], (0.0, 8.5), "um"),
+    "fast-bouc-wen": (["--dynamics", "second-order", "--dynamics-data", "{steps}"], (0.0, 9.0), "um"),
     "duhem-lag": (["--dynamics", "first-order"], (-3.0, 2.5), "mm"),
     "duhem-monotone-lag": (["--dynamics", "first-order"], (-3.5, 2.5), "mm"),
 }
@@ -39,6 +41,16 @@ def _write_record(path: Path, stage, seconds: float, seed: int) -> None:
     u = excitation(*stage.input_range, stage.sample_period, seconds, seed)
     y = stage.respond(u, seed)
     t = np.arange(len(u)) * stage.sample_period
+    np.savetxt(path, np.column_stack([t, u, y]), delimiter=",", header="t,u,y", comments="", fmt="%.9g")
+
+
+def _write_steps(path: Path, stage, seconds: float, seed: int) -> None:
+    """Steps to random levels every 50 ms: a record that shows the stage's resonance."""
+    samples, hold = round(seconds / stage.sample_period), round(0.05 / stage.sample_period)
+    levels = np.random.default_rng(seed).uniform(*stage.input_range, size=samples // hold + 1)
+    u = np.repeat(levels, hold)[:samples]
+    y = stage.respond(u, seed)
+    t = np.arange(samples) * stage.sample_period
     np.savetxt(path, np.column_stack([t, u, y]), delimiter=",", header="t,u,y", comments="", fmt="%.9g")
 
 
@@ -74,6 +86,9 @@ def prepare(out: Path) -> None:
         stage = STAGES[name]()
         _write_record(folder / "fit.csv", stage, 20.0, 1)
         _write_record(folder / "validate.csv", stage, 10.0, 2)
+        if "{steps}" in options:
+            _write_steps(folder / "steps.csv", stage, 2.0, 3)
+            options = [str(folder / "steps.csv") if o == "{steps}" else o for o in options]
         _hystmpc("identify", "auto", str(folder / "fit.csv"), "--validate", str(folder / "validate.csv"), *options,
                  "--out", str(folder / "model.json"), "--no-plots", "--quiet")
         _random_reference(folder / "random.csv", stage.reset(0).truth["y"], *output_range)

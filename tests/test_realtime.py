@@ -3,12 +3,15 @@
 import json
 import shutil
 
+import numpy as np
 import pytest
 
+from hystmpc.experiments import runner
 from hystmpc.experiments.benches import get_bench
 from hystmpc.experiments.cli import main
 from hystmpc.experiments.firmware import MICROCONTROLLER_SENSITIVITY_BLOCK
 from hystmpc.experiments.realtime import codegen
+from hystmpc.plants.base import Measurement
 
 
 @pytest.mark.slow  # the whole-scenario check of every bench below covers it; kept for a quick local look
@@ -364,3 +367,46 @@ def test_speed_keeps_two_starts_only_for_the_solvers_that_report_a_cost():
                          "variants": [{"variant": "gn", "multistart": True, **row},
                                       {"variant": "ipopt", "multistart": False, **row}]})
     assert "| gn, two starts |" in table and "| ipopt |" in table
+
+
+
+def test_a_slow_run_is_announced_with_its_expected_time_after_its_first_steps(caplog, monkeypatch):
+    assert runner.slow_run_notice([0.02] * 5, 1000, 1e-3) == (
+        "20 ms per step over the first 5, 20 × the 1 ms period: the remaining 1,000 samples take about 20 s")
+    assert runner.slow_run_notice([0.02] * 5, 400, 1e-3) is None  # 8 s: not worth a line
+    assert runner.slow_run_notice([0.009] * 5, 10 ** 6, 1e-3) is None  # 9 periods: not slow
+    assert "about 2.8 h" in runner.slow_run_notice([0.01, 0.01, 5.0], 10 ** 6, 1e-3)  # the median, not the mean
+
+    class Still:  # a plant that never moves
+        sample_period = 1e-3
+
+        def reset(self, seed):
+            return Measurement(0.0, 0.0)
+
+        def step(self, u):
+            return Measurement(0.0, 0.0)
+
+    class Idle:
+        horizon = 0
+
+        def reset(self):
+            pass
+
+        def step(self, measurement, ref_window):
+            return 0.0
+
+    class Clock:  # each read 15 ms after the last: every step takes 15 ms as the run measures it
+        now = 0.0
+
+        @classmethod
+        def perf_counter(cls):
+            cls.now += 0.015
+            return cls.now
+
+    monkeypatch.setattr(runner, "time", Clock)
+    with caplog.at_level("WARNING", logger="hystmpc"):
+        runner.simulate(Still(), Idle(), np.zeros(2000), name="idle", scenario="flat")
+        runner.simulate(Still(), Idle(), np.zeros(600), name="idle", scenario="short")  # 9 s left: quiet
+    assert [r.getMessage() for r in caplog.records] == [
+        "slow run: flat · idle: 15 ms per step over the first 5, 15 × the 1 ms period: the remaining 1,994 "
+        "samples take about 30 s"]
