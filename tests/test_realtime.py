@@ -410,3 +410,21 @@ def test_a_slow_run_is_announced_with_its_expected_time_after_its_first_steps(ca
     assert [r.getMessage() for r in caplog.records] == [
         "slow run: flat · idle: 15 ms per step over the first 5, 15 × the 1 ms period: the remaining 1,994 "
         "samples take about 30 s"]
+
+
+def test_a_run_that_is_not_real_time_says_what_shortens_the_nmpc_step(tmp_path, monkeypatch, capsys):
+    class Clock:  # each read 50 ms after the last: every step takes 50 ms, 2.5 periods of pam's 20 ms
+        now = 0.0
+
+        @classmethod
+        def perf_counter(cls):
+            cls.now += 0.05
+            return cls.now
+
+    monkeypatch.setattr(runner, "time", Clock)
+    assert main(["run", "pam", "square-20", "--controller", "nmpc", "--duration", "0.5", "--no-plots",
+                 "--out", str(tmp_path / "run")]) == 0
+    err = capsys.readouterr().err
+    assert "not real time on this machine: square-20 · nmpc: median 50 ms" in err
+    assert "nmpc: a shorter nmpc.horizon, or nmpc.multistart=false, shortens its step; 'hystmpc speed pam' " \
+           "times it alone" in err

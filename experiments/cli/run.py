@@ -206,6 +206,9 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
     for r in runs:  # warnings: shown even with --quiet
         if r.solver and not r.timing["real_time"]:
             logging.getLogger("hystmpc").warning(f"not real time on this machine: {r.real_time_verdict()}")
+    if any(r.controller == "nmpc" and r.solver and not r.timing["real_time"] for r in runs):
+        logging.getLogger("hystmpc").warning(f"nmpc: a shorter nmpc.horizon, or nmpc.multistart=false, shortens its "
+                                             f"step; 'hystmpc speed {args.bench}' times it alone")
     oscillating = [f"{r.scenario} · {r.controller} ({r.metrics['oscillation_cycles']:g} cycles at "
                    f"{r.metrics['oscillation_hz']:.2g} Hz)" for r in runs if r.metrics.get("oscillating")]
     if oscillating:
