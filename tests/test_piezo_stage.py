@@ -2,6 +2,7 @@
 hysteresis and second-order stage dynamics, none of it known to hystmpc before this file."""
 
 import numpy as np
+import pytest
 
 from hystmpc.experiments import PidController, PidGains, inverse_feedforward_pid, simulate
 from hystmpc.models import Dynamics, PrandtlIshlinskii, build_prediction_model
@@ -25,6 +26,7 @@ def reference(t):
     return np.where(t < 0.1, 1 - np.cos(np.pi * t / 0.1), 7.5 - 5.5 * np.cos(2 * np.pi * 5 * (t - 0.1)))
 
 
+@pytest.mark.slow  # 16 s: tunes both baselines on a grid; tests/test_readme_example.py runs the short example
 def test_nmpc_beats_pid_and_inverse_feedforward_pid_on_a_piezo_stage():
     nominal = PrandtlIshlinskii(0.09, (10.0, 25.0, 40.0), (0.03, 0.02, 0.01))  # um/V, V
     truth = PrandtlIshlinskii(0.095, (9.5, 24.0, 38.0), (0.0315, 0.021, 0.0105))  # the rig is never the model

@@ -315,6 +315,7 @@ def test_runtime_c_runs_the_generated_controller_with_the_python_controllers_inp
     assert (entry / "libcontroller.so").exists() and not list((tmp_path / "controllers").glob("building-*"))
 
 
+@pytest.mark.slow  # 30 s: builds reluctance's and dea's generated controllers into an empty cache
 def test_runtime_auto_runs_the_generated_controller_where_it_can(tmp_path, monkeypatch, caplog):
     """``nmpc.runtime=auto`` (reluctance's default): the generated controller with an RTI
     solver and a C compiler; the Python controller with another solver, and without a
