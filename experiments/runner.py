@@ -21,7 +21,7 @@ from hystmpc.experiments.report import json_safe
 from hystmpc.plants.base import Measurement, Plant
 
 ESTIMATE_STEPS = 5
-"""Steps timed for the early work estimate (after the first, which may build or compile)."""
+"""Steps timed for the early estimate of a slow run (after the first, which may build or compile)."""
 SLOW_FACTOR = 10.0
 """A run is announced as slow when its steps take this many periods or more..."""
 SLOW_SECONDS = 10.0
@@ -305,33 +305,22 @@ def _checked(t: np.ndarray, ref: np.ndarray) -> np.ndarray:
     return ref
 
 
-def slow_run_notice(step_seconds, samples: int, sample_period: float) -> str | None:
-    """The expected time of a run whose first steps were slow, or None when it is not slow.
+def _slow_run_notice(step_seconds, samples: int, sample_period: float) -> str | None:
+    """The controller's expected time for the rest of a run whose first steps were slow, or None.
 
-    Slow: the median of ``step_seconds`` is :data:`SLOW_FACTOR` periods or more and the
-    ``samples`` still to run take :data:`SLOW_SECONDS` or more at that rate.
-
-    Parameters
-    ----------
-    step_seconds : array_like
-        Times of the steps measured so far (s).
-    samples : int
-        Steps still to run.
-    sample_period : float
-        Seconds per sample.
-
-    Returns
-    -------
-    str or None
-        One line: the step time, its ratio to the period and the time the rest will take.
+    Slow: the median of ``step_seconds`` is :data:`SLOW_FACTOR` periods or more, and the
+    ``samples`` still to run take the controller :data:`SLOW_SECONDS` or more at that rate.
     """
+    step_seconds = np.asarray(step_seconds, float)
+    if step_seconds.size == 0 or not np.all(np.isfinite(step_seconds)):
+        return None
     per_step = float(np.median(step_seconds))
     rest = per_step * samples
     if per_step < SLOW_FACTOR * sample_period or rest < SLOW_SECONDS:
         return None
-    return (f"{per_step * 1e3:.3g} ms per step over the first {len(step_seconds)}, "
-            f"{per_step / sample_period:.0f} × the {sample_period * 1e3:.3g} ms period: the remaining "
-            f"{samples:,} samples take about {_duration(rest)}")
+    return (f"{per_step * 1e3:.3g} ms per step (median of steps 2–{step_seconds.size + 1}), "
+            f"{per_step / sample_period:.0f} × the {sample_period * 1e3:.3g} ms period: the controller alone "
+            f"needs about {_duration(rest)} for the remaining {samples:,} samples")
 
 
 def _duration(seconds: float) -> str:
@@ -380,6 +369,9 @@ def simulate(plant: Plant, controller: Controller, reference, duration: float | 
     if len(t) < 2:
         raise ValueError(f"the run needs at least 2 samples at {dt:g} s, got {len(t)}")
     ref = _checked(t, ref)
+    if scenario is None:
+        scenario = reference.name if isinstance(reference, Scenario) else "reference"
+    name = name or type(controller).__name__
     controller.reset()
     horizon = getattr(controller, "horizon", 0)
     ref_padded = np.concatenate((ref, np.full(horizon, ref[-1])))
@@ -398,11 +390,9 @@ def simulate(plant: Plant, controller: Controller, reference, duration: float | 
         u = controller.step(meas, ref_padded[k: k + horizon + 1])
         step_times[k] = time.perf_counter() - start
         if k == ESTIMATE_STEPS:
-            notice = slow_run_notice(step_times[1: k + 1], n - k - 1, dt)
-            if notice:
-                label = scenario or getattr(reference, "name", "reference")
-                logging.getLogger("hystmpc").warning(f"slow run: {label} · {name or type(controller).__name__}: "
-                                                     f"{notice}")
+            notice = _slow_run_notice(step_times[1: k + 1], n - k - 1, dt)
+            if notice:  # live: a compare worker writes it at once, not with the run's result
+                logging.getLogger("hystmpc").info(f"slow run: {scenario} · {name}: {notice}", extra={"live": True})
         pred[k] = getattr(controller, "predicted_output", float("nan"))
         u, clipped, bad = guard.apply(float(u), last)
         clips += clipped
@@ -418,9 +408,7 @@ def simulate(plant: Plant, controller: Controller, reference, duration: float | 
         metrics.update(step_metrics(t, ref, out, min_step=0.25 * span) or {})
     metrics.update(oscillation_metrics(t, ref, out))
     metrics.update(input_metrics(u_hist))
-    if scenario is None:
-        scenario = reference.name if isinstance(reference, Scenario) else "reference"
-    return RunResult(scenario=scenario, controller=name or type(controller).__name__, seed=seed,
+    return RunResult(scenario=scenario, controller=name, seed=seed,
                      sample_period=dt, t=t, reference=ref, output=out, input=u_hist, predicted=pred,
                      truth={k: np.asarray(v) for k, v in truth.items()}, step_times=step_times,
                      metrics=metrics, solver=controller.stats() if hasattr(controller, "stats") else None,

@@ -9,8 +9,10 @@ import pytest
 from hystmpc.experiments import runner
 from hystmpc.experiments.benches import get_bench
 from hystmpc.experiments.cli import main
+from hystmpc.experiments.cli import run as run_module
 from hystmpc.experiments.firmware import MICROCONTROLLER_SENSITIVITY_BLOCK
 from hystmpc.experiments.realtime import codegen
+from hystmpc.mpc.settings import NmpcSettings
 from hystmpc.plants.base import Measurement
 
 
@@ -315,11 +317,26 @@ def test_runtime_c_runs_the_generated_controller_with_the_python_controllers_inp
     assert (entry / "libcontroller.so").exists() and not list((tmp_path / "controllers").glob("building-*"))
 
 
+def test_runtime_auto_runs_python_without_a_compiler_where_runtime_c_is_refused(tmp_path, monkeypatch, caplog):
+    from hystmpc.mpc import runtime
+    monkeypatch.setattr(runtime, "_SAID", set())  # each notice is said once per process
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
+    bench = get_bench("reluctance")
+    with caplog.at_level("WARNING", logger="hystmpc"):
+        fallback = bench.build_controller("nmpc", bench.configure(tuned=False))
+    assert bench.configure(tuned=False)["nmpc"].runtime == "auto"
+    assert type(fallback).__name__ == "NmpcController"
+    assert "nmpc.runtime=auto runs the controller in Python" in caplog.text
+    with pytest.raises(ValueError, match="nmpc.runtime=c needs a C compiler"):
+        bench.build_controller("nmpc", bench.configure(["nmpc.runtime=c"], tuned=False))
+
+
 @pytest.mark.slow  # 30 s: builds reluctance's and dea's generated controllers into an empty cache
 def test_runtime_auto_runs_the_generated_controller_where_it_can(tmp_path, monkeypatch, caplog):
     """``nmpc.runtime=auto`` (reluctance's default): the generated controller with an RTI
     solver and a C compiler; the Python controller with another solver, and without a
-    compiler after a notice, where ``runtime=c`` is refused."""
+    compiler after a notice, where ``runtime=c`` is refused (the last two also in
+    :func:`test_runtime_auto_runs_python_without_a_compiler_where_runtime_c_is_refused`)."""
     from hystmpc.mpc import runtime
     from hystmpc.mpc.codegen import c_compiler
     if c_compiler() is None:
@@ -370,13 +387,14 @@ def test_speed_keeps_two_starts_only_for_the_solvers_that_report_a_cost():
     assert "| gn, two starts |" in table and "| ipopt |" in table
 
 
-
 def test_a_slow_run_is_announced_with_its_expected_time_after_its_first_steps(caplog, monkeypatch):
-    assert runner.slow_run_notice([0.02] * 5, 1000, 1e-3) == (
-        "20 ms per step over the first 5, 20 × the 1 ms period: the remaining 1,000 samples take about 20 s")
-    assert runner.slow_run_notice([0.02] * 5, 400, 1e-3) is None  # 8 s: not worth a line
-    assert runner.slow_run_notice([0.009] * 5, 10 ** 6, 1e-3) is None  # 9 periods: not slow
-    assert "about 2.8 h" in runner.slow_run_notice([0.01, 0.01, 5.0], 10 ** 6, 1e-3)  # the median, not the mean
+    notice = runner._slow_run_notice
+    assert notice([0.02] * 5, 1000, 1e-3) == ("20 ms per step (median of steps 2–6), 20 × the 1 ms period: the "
+                                             "controller alone needs about 20 s for the remaining 1,000 samples")
+    assert notice([0.02] * 5, 400, 1e-3) is None  # 8 s: not worth a line
+    assert notice([0.009] * 5, 10 ** 6, 1e-3) is None  # 9 periods: not slow
+    assert "about 2.8 h" in notice([0.01, 0.01, 5.0], 10 ** 6, 1e-3)  # the median, not the mean
+    assert notice([], 10 ** 6, 1e-3) is None and notice([0.5, float("nan")], 10 ** 6, 1e-3) is None
 
     class Still:  # a plant that never moves
         sample_period = 1e-3
@@ -405,27 +423,45 @@ def test_a_slow_run_is_announced_with_its_expected_time_after_its_first_steps(ca
             return cls.now
 
     monkeypatch.setattr(runner, "time", Clock)
-    with caplog.at_level("WARNING", logger="hystmpc"):
+    with caplog.at_level("INFO", logger="hystmpc"):
         runner.simulate(Still(), Idle(), np.zeros(2000), name="idle", scenario="flat")
-        runner.simulate(Still(), Idle(), np.zeros(600), name="idle", scenario="short")  # 9 s left: quiet
+        runner.simulate(Still(), Idle(), np.zeros(600))  # 9 s left: quiet
     assert [r.getMessage() for r in caplog.records] == [
-        "slow run: flat · idle: 15 ms per step over the first 5, 15 × the 1 ms period: the remaining 1,994 "
-        "samples take about 30 s"]
+        "slow run: flat · idle: 15 ms per step (median of steps 2–6), 15 × the 1 ms period: the controller alone "
+        "needs about 30 s for the remaining 1,994 samples"]
+    assert caplog.records[0].levelname == "INFO" and caplog.records[0].live  # a notice, written at once by workers
 
 
-def test_a_run_that_is_not_real_time_says_what_shortens_the_nmpc_step(tmp_path, monkeypatch, capsys):
-    class Clock:  # each read 50 ms after the last: every step takes 50 ms, 2.5 periods of pam's 20 ms
+def _slow_clock(seconds_per_read: float):
+    class Clock:  # each read ``seconds_per_read`` after the last: a step takes that long as the run measures it
         now = 0.0
 
         @classmethod
         def perf_counter(cls):
-            cls.now += 0.05
+            cls.now += seconds_per_read
             return cls.now
+    return Clock
 
-    monkeypatch.setattr(runner, "time", Clock)
-    assert main(["run", "pam", "square-20", "--controller", "nmpc", "--duration", "0.5", "--no-plots",
-                 "--out", str(tmp_path / "run")]) == 0
+
+def test_an_nmpc_run_late_at_p95_says_what_shortens_its_step(tmp_path, monkeypatch, capsys):
+    args = ["run", "pam", "square-20", "--controller", "nmpc", "--duration", "0.5", "--no-plots"]
+    monkeypatch.setattr(runner, "time", _slow_clock(0.05))  # 50 ms a step: 2.5 periods of pam's 20 ms
+    assert main([*args, "--out", str(tmp_path / "late"), "--set", "nmpc.horizon=12"]) == 0
     err = capsys.readouterr().err
     assert "not real time on this machine: square-20 · nmpc: median 50 ms" in err
-    assert "nmpc: a shorter nmpc.horizon, or nmpc.multistart=false, shortens its step; 'hystmpc speed pam' " \
-           "times it alone" in err
+    assert ("nmpc: its p95 step is up to 250% of the period; a shorter nmpc.horizon (now 12) shortens it "
+            "('hystmpc speed pam' with the same --set options times it alone)") in err
+    monkeypatch.setattr(runner, "time", _slow_clock(0.005))  # 5 ms: in time, no hint
+    assert main([*args, "--out", str(tmp_path / "in-time")]) == 0
+    assert "nmpc:" not in capsys.readouterr().err
+    assert "nmpc.solver=rti-c (now ipopt)" in run_module._shorter_step_hint(
+        NmpcSettings(solver="ipopt"), "pam", [_late(1.3)])
+    assert run_module._shorter_step_hint(NmpcSettings(multistart=True), "x.toml", [_late(1.3), _late(2.0)]) == (
+        "nmpc: its p95 step is up to 200% of the period; a shorter nmpc.horizon (now 20), or nmpc.multistart=false "
+        "(one start per sample) shortens it ('hystmpc speed x.toml' with the same --set options times it alone)")
+
+
+def _late(share: float):
+    class Late:
+        timing = {"p95_share_of_period": share}
+    return Late()

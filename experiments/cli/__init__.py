@@ -50,7 +50,9 @@ class _NoticeHandler(logging.StreamHandler):
     def emit(self, record):
         if getattr(self.stream, "closed", False):
             self.stream = sys.stderr
-        super().emit(record)
+        from tqdm import tqdm
+        with tqdm.external_write_mode(file=self.stream):  # a progress bar is cleared, then redrawn below
+            super().emit(record)
 
 
 def _log_notices(show: bool) -> None:

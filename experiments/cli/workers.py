@@ -14,6 +14,7 @@ import io
 import logging
 import multiprocessing
 import os
+import sys
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
@@ -84,7 +85,10 @@ def _run_task(task: CompareRun) -> tuple[RunResult, str, list[logging.LogRecord]
 
     class Keep(logging.Handler):
         def emit(self, record: logging.LogRecord) -> None:
-            records.append(record)
+            if getattr(record, "live", False):  # news during the run (a slow run's estimate): now, not after it
+                print(f"hystmpc: {record.getMessage()}", file=sys.__stderr__, flush=True)
+            else:
+                records.append(record)
 
     logger = logging.getLogger("hystmpc")
     logger.handlers[:] = [Keep()]
