@@ -1,19 +1,29 @@
-"""Bouc–Wen hysteresis (rate-independent, exponent n = 1), exact between samples.
+"""Bouc–Wen hysteresis (rate-independent, exponent n >= 1): exact between samples for n = 1.
 
 The differential model piezo-stage and MR-damper users know, written with a unit internal
 variable ``ζ`` (``z = A·ζ``)::
 
-    y = k·u + A·ζ,      ζ' = u̇ − β·|u̇|·ζ − γ·u̇·|ζ|,
+    y = k·u + A·ζ,      ζ' = u̇ − β·|u̇|·|ζ|^(n−1)·ζ − γ·u̇·|ζ|^n,
 
-with ``β > |γ|`` (a bounded, dissipative loop: ``|ζ| <= 1/(β + γ)``). ``A > 0`` is the
+with ``β > |γ|`` (a bounded, dissipative loop: ``|ζ| <= (β + γ)^(−1/n)``). ``A > 0`` is the
 textbook form; ``A < 0`` is the piezo form ``y = d·u − h`` (reversal curves that start flat
 and steepen), allowed while the output stays monotone in the input:
-``k >= −A · 2β/(β + γ)``, the largest ``dζ/du``. With the input's direction ``σ`` fixed over a
-move, ``dζ/du = 1 − (βσ + γ sgn ζ)·ζ`` is linear on each side of ``ζ = 0``, so a move of any
-size has a closed form (an exponential approach to ``±1/(β ± γ)``, with the crossing of
-``ζ = 0`` found exactly). The exact step is that closed form; the loop does not depend on
-how finely the input is sampled. Along a monotone move the output is monotone, so the
-inverse is a bisection.
+``k >= −A · 2β/(β + γ)``, the largest ``dζ/du`` (whatever ``n``). For ``n = 1``, with the
+input's direction ``σ`` fixed over a move, ``dζ/du = 1 − (βσ + γ sgn ζ)·ζ`` is linear on each
+side of ``ζ = 0``, so a move of any size has a closed form (an exponential approach to
+``±1/(β ± γ)``, with the crossing of ``ζ = 0`` found exactly). The step is that closed form;
+the loop does not depend on how finely the input is sampled. Along a monotone move the
+output is monotone and smooth, so the inverse is a modified regula falsi (the Illinois
+method).
+
+For ``n != 1`` there is no closed form. A move is cut in :data:`SUBSTEPS` equal pieces
+``h``, each an exponential Euler step ``ζ + h·φ1(h·f′)·f`` of ``dζ/du = f(ζ)``, ``φ1(x) =
+(e^x − 1)/x``: ``h·f′ <= 0`` on both sides of zero, so a move of any size stays bounded, and
+a large one converges to ``ζ``'s bound as Newton's method would. The step is the same
+arithmetic in NumPy (:func:`~hystmpc.models.compiled.bouc_wen_advance_power`) and on CasADi
+expressions, so a generated controller repeats it. Against the equation integrated finely it
+errs by at most 3e-4 of the output's span for ``n <= 3`` and 1e-3 for ``n <= 4``, on slow
+moves, a sine and jumps of several loop widths a sample (``tests/test_hysteresis_contract.py``).
 
 State: ``[u_last, ζ]``; relaxed at ``u0`` means ``ζ = 0``.
 """
@@ -25,7 +35,15 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from hystmpc.models.base import SteppedModel, bisection_inverse, check_smoothing, smooth_function, symbolic
+from hystmpc.models.base import SteppedModel, check_smoothing, smooth_function, symbolic
+from hystmpc.models.inverse_search import illinois_inverse
+
+
+def _phi1(x):
+    """``(e^x − 1)/x`` on CasADi expressions (its series near 0, as in the compiled step)."""
+    small = ca.fabs(x) < 1e-6
+    safe = ca.if_else(small, 1.0, x)
+    return ca.if_else(small, 1.0 + 0.5 * x + x * x / 6.0, ca.expm1(safe) / safe)
 
 
 def _phi(x):
@@ -33,6 +51,12 @@ def _phi(x):
     small = ca.fabs(x) < 1e-6
     safe = ca.if_else(small, 1.0, x)
     return ca.if_else(small, 1.0 - 0.5 * x + x * x / 6.0, -ca.expm1(-safe) / safe)
+
+
+SUBSTEPS = 8
+"""Pieces of a move for ``n != 1``."""
+MAX_EXPONENT = 4.0
+"""The largest ``n`` (beyond it the pieces no longer hold the stated accuracy)."""
 
 
 @dataclass(frozen=True)
@@ -47,8 +71,12 @@ class BoucWen(SteppedModel):
     """β > |γ| (1 / input unit)."""
     gamma: float
     """γ (1 / input unit): the loop's asymmetry between loading and unloading."""
+    exponent: float = 1.0
+    """n >= 1: the sharpness of the loop's turn towards its bound (β and γ then in 1 / input unit^n)."""
 
     def __post_init__(self):
+        if not 1.0 <= self.exponent <= MAX_EXPONENT:
+            raise ValueError(f"exponent must lie in [1, {MAX_EXPONENT:g}], got {self.exponent}")
         for name in ("linear_gain", "a", "beta", "gamma"):
             if not np.isfinite(getattr(self, name)):
                 raise ValueError(f"{name} must be finite, got {getattr(self, name)}")
@@ -114,7 +142,7 @@ class BoucWen(SteppedModel):
         return straight, crossed, reach
 
     def step(self, state, u: float) -> tuple[np.ndarray, float]:
-        """Exact step to input ``u``: ``(state, y)`` (CasADi expressions when ``state`` or ``u`` is one).
+        """The step to input ``u``: ``(state, y)`` (CasADi expressions when ``state`` or ``u`` is one).
 
         Parameters
         ----------
@@ -133,18 +161,47 @@ class BoucWen(SteppedModel):
         if symbolic(state) or symbolic(u):
             du, z = u - state[0], state[1]
             s = ca.if_else(du > 0, 1.0, -1.0)
-            q = ca.if_else(ca.logic_or(z > 0, ca.logic_and(z == 0, du > 0)), 1.0, -1.0)
-            straight, crossed, reach = self._moves(z, du, s, q)
-            crosses = ca.logic_and(q == -s, ca.fabs(du) > ca.fabs(reach))
-            nxt = ca.vertcat(u, ca.if_else(du == 0, z, ca.if_else(crosses, crossed, straight)))
+            if self.exponent == 1.0:
+                moved = self._hard_move(z, du, s)
+            else:
+                moved = self._pieces(z, du, s, lambda x: (ca.sign(x), 0.0), lambda x: (ca.fabs(x), ca.sign(x)))
+            nxt = ca.vertcat(u, ca.if_else(du == 0, z, moved))
             return nxt, self.output(nxt)
         if not np.isfinite(u):
             raise ValueError(f"u must be finite, got {u}")
-        from hystmpc.models.compiled import bouc_wen_advance  # numba: imported when first needed
+        from hystmpc.models import compiled  # numba: imported when first needed
         state = np.asarray(state, float)
-        z = bouc_wen_advance(float(state[1]), float(u) - float(state[0]), 1.0, self.beta, self.gamma)
+        z, du = float(state[1]), float(u) - float(state[0])
+        if self.exponent == 1.0:
+            z = compiled.bouc_wen_advance(z, du, 1.0, self.beta, self.gamma)
+        else:
+            z = compiled.bouc_wen_advance_power(z, du, self.beta, self.gamma, self.exponent, SUBSTEPS)
         nxt = np.array([float(u), z])
         return nxt, self.output(nxt)
+
+    def _hard_move(self, z, du, s):
+        """``ζ`` after the move ``du`` in the direction ``s`` (CasADi, the closed form's switches)."""
+        q = ca.if_else(ca.logic_or(z > 0, ca.logic_and(z == 0, s > 0)), 1.0, -1.0)
+        straight, crossed, reach = self._moves(z, du, s, q)
+        crosses = ca.logic_and(q == -s, ca.fabs(du) > ca.fabs(reach))
+        return ca.if_else(crosses, crossed, straight)
+
+    def _pieces(self, z, du, s, side, magnitude):
+        """:data:`SUBSTEPS` exponential Euler pieces of a move (``n != 1``, CasADi).
+
+        ``side(ζ)`` is ``(sgn ζ, its derivative)`` and ``magnitude(ζ)`` is ``(|ζ|, its
+        derivative)``, or smoothed ones.
+        """
+        n, h = self.exponent, du / SUBSTEPS
+        for _ in range(SUBSTEPS):
+            sign, dsign = side(z)
+            m, dm = magnitude(z)
+            c = self.beta * s * sign + self.gamma
+            w = m ** (n - 1.0)
+            rate = 1.0 - c * w * m
+            slope = -(self.beta * s * dsign * w * m + n * c * w * dm)
+            z = z + h * _phi1(h * slope) * rate
+        return z
 
     def smooth_step(self, eps: float, direction_eps: float | None = None) -> ca.Function:
         """Smooth step ``(state, u) -> (state_next, y)``.
@@ -152,7 +209,8 @@ class BoucWen(SteppedModel):
         Smoothed: the input's direction ``tanh(Δu / direction_eps)``, the side of ``ζ = 0``
         ``tanh(ζ / eps)`` (at ``ζ = 0`` the move's direction, as in the exact step) and the crossing
         of zero within the move blended over ``eps`` of input. The closed form is kept, so the
-        error is O(eps) and does not grow with the move.
+        error is O(eps) and does not grow with the move. For ``n != 1``, the pieces of the
+        exact step with ``sgn ζ`` as ``tanh(ζ / eps)`` and ``|ζ|`` as ``sqrt(ζ² + eps²)``.
 
         Parameters
         ----------
@@ -169,15 +227,26 @@ class BoucWen(SteppedModel):
         check_smoothing(eps, direction_eps)
         direction_eps = direction_eps or eps
 
-        def expressions(state, u):
-            du, z = u - state[0], state[1]
-            s = ca.tanh(du / direction_eps)
+        def move(z, du, s):
             side = ca.tanh(z / eps)
             q = side + (1 - side * side) * s  # at z = 0 the move's direction, as in the exact step
             straight, crossed, reach = self._moves(z, du, s, q)
             towards = 0.5 * (1 - s * q)  # z on the side the move leaves
             beyond = 0.5 * (1 + ca.tanh((ca.fabs(du) - ca.fabs(reach)) / eps))
-            z_next = straight + towards * beyond * (crossed - straight)
+            return straight + towards * beyond * (crossed - straight)
+
+        def side(z):
+            t = ca.tanh(z / eps)
+            return t, (1 - t * t) / eps
+
+        def magnitude(z):
+            m = ca.sqrt(z * z + eps * eps)
+            return m, z / m
+
+        def expressions(state, u):
+            du, z = u - state[0], state[1]
+            s = ca.tanh(du / direction_eps)
+            z_next = move(z, du, s) if self.exponent == 1.0 else self._pieces(z, du, s, side, magnitude)
             return ca.vertcat(u, z_next), self.linear_gain * u + self.a * z_next
         return smooth_function("bouc_wen_smooth", 2, expressions)
 
@@ -192,15 +261,22 @@ class BoucWen(SteppedModel):
         edges : tuple of float
             ``(inf, -inf)``: no input edge, only the move counts.
         reach : float
-            ``40 / (β − |γ|)`` (input units).
+            ``40 / (β − |γ|)`` (input units) for ``n = 1``; for ``n != 1`` twice the bound plus 40
+            over the slowest rate of approach to it.
         """
-        return (np.inf, -np.inf), 40.0 / (self.beta - abs(self.gamma))
+        if self.exponent == 1.0:
+            return (np.inf, -np.inf), 40.0 / (self.beta - abs(self.gamma))
+        bound = (self.beta + self.gamma) ** (-1.0 / self.exponent)
+        return (np.inf, -np.inf), 2.0 * bound + 40.0 / (self.exponent * (self.beta - abs(self.gamma)) * bound ** (
+            self.exponent - 1.0))
 
     def inverse_step(self, state, y_target: float) -> tuple[np.ndarray, float]:
         """The input that brings the output to ``y_target`` from ``state``, and the state after it.
 
-        A bisection over a monotone move (NumPy or CasADi). With ``k = 0`` a target beyond the
-        loop's reach gives the input where ``ζ`` has all but reached its bound.
+        The Illinois method over a monotone move (NumPy or CasADi, the same arithmetic): the
+        output along a move is smooth, so a modified regula falsi needs about 9 steps where a
+        bisection needs 50. With ``k = 0`` a target beyond the loop's reach gives the input where
+        ``ζ`` has all but reached its bound.
 
         Parameters
         ----------
@@ -216,26 +292,6 @@ class BoucWen(SteppedModel):
         u : float or CasADi expression
             The input.
         """
-        if symbolic(state) or symbolic(y_target):
-            return bisection_inverse(self, state, y_target, *self.linear_beyond(),
-                                     (self.linear_gain, self.linear_gain))
-        if not np.isfinite(y_target):
+        if not (symbolic(state) or symbolic(y_target) or np.isfinite(y_target)):
             raise ValueError(f"y_target must be finite, got {y_target}")
-        state = np.asarray(state, float)
-        y0 = self.output(state)
-        if y_target == y0:
-            return state.copy(), float(state[0])
-        d = 1.0 if y_target > y0 else -1.0
-        _, reach = self.linear_beyond()
-        near, far = float(state[0]), float(state[0]) + d * reach
-        y_far = self.step(state, far)[1]
-        if (y_far - y_target) * d < 0:
-            u = far + (y_target - y_far) / self.linear_gain if self.linear_gain > 0 else far
-            return self.step(state, u)[0], float(u)
-        for _ in range(56):
-            mid = 0.5 * (near + far)
-            if (self.step(state, mid)[1] - y_target) * d >= 0:
-                far = mid
-            else:
-                near = mid
-        return self.step(state, far)[0], float(far)
+        return illinois_inverse(self, state, y_target, *self.linear_beyond(), (self.linear_gain, self.linear_gain))

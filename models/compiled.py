@@ -138,7 +138,57 @@ def bouc_wen_advance(z, du, a, beta, gamma):
 
 
 @njit(cache=True)
-def bouc_wen_states(u, a, beta, gamma, z0):
+def _phi1(x):
+    """``(e^x − 1) / x``, 1 at 0 (the series below 1e-6, as in the CasADi step)."""
+    if abs(x) < 1e-6:
+        return 1.0 + 0.5 * x + x * x / 6.0
+    return np.expm1(x) / x
+
+
+@njit(cache=True)
+def bouc_wen_advance_power(z, du, beta, gamma, n, pieces):
+    """Bouc–Wen's unit internal variable after the input moves by ``du``, for an exponent ``n > 1``.
+
+    The move in ``pieces`` equal pieces ``h``, each an exponential Euler step of
+    ``dζ/du = f(ζ) = 1 − (β sgn(du) sgn ζ + γ)|ζ|^n``: ``ζ + h·φ1(h·f′(ζ))·f(ζ)`` with
+    ``φ1(x) = (e^x − 1)/x``; ``h·f′ <= 0`` on both sides of zero, so no move diverges. The
+    arithmetic of :class:`~hystmpc.models.bouc_wen.BoucWen`'s step.
+
+    Parameters
+    ----------
+    z : float
+        Internal variable before the move.
+    du : float
+        Input move.
+    beta, gamma : float
+        β and γ (1 / input unit^n).
+    n : float
+        Exponent.
+    pieces : int
+        Pieces of the move.
+
+    Returns
+    -------
+    float
+        ``ζ`` after the move.
+    """
+    if du == 0.0:
+        return z
+    s = 1.0 if du > 0 else -1.0
+    h = du / pieces
+    for _ in range(pieces):
+        side = 1.0 if z > 0 else (-1.0 if z < 0 else 0.0)
+        c = beta * s * side + gamma
+        m = abs(z)
+        w = m ** (n - 1.0)
+        rate = 1.0 - c * w * m
+        slope = -n * c * w * side
+        z = z + h * _phi1(h * slope) * rate
+    return z
+
+
+@njit(cache=True)
+def bouc_wen_states(u, a, beta, gamma, z0, exponent=1.0, pieces=8):
     """Bouc–Wen's internal variable after each sample of ``u`` (from ``u[0]`` with ``z0``).
 
     Parameters
@@ -151,6 +201,10 @@ def bouc_wen_states(u, a, beta, gamma, z0):
         β and γ (1 / input unit).
     z0 : float
         Internal variable at ``u[0]``.
+    exponent : float, optional
+        Bouc–Wen's ``n`` (1: the closed form; otherwise ``a`` must be 1).
+    pieces : int, optional
+        Pieces of each move for ``n != 1`` (:func:`bouc_wen_advance_power`).
 
     Returns
     -------
@@ -162,7 +216,10 @@ def bouc_wen_states(u, a, beta, gamma, z0):
     z = z0
     last = u[0]
     for k in range(n):
-        z = bouc_wen_advance(z, u[k] - last, a, beta, gamma)
+        if exponent == 1.0:
+            z = bouc_wen_advance(z, u[k] - last, a, beta, gamma)
+        else:
+            z = bouc_wen_advance_power(z, u[k] - last, beta, gamma, exponent, pieces)
         last = u[k]
         out[k] = z
     return out

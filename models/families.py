@@ -157,7 +157,7 @@ def compiled_response(model, u) -> np.ndarray | None:
     if isinstance(model, Preisach):
         return model.outputs(np.column_stack((u, plays(model.thresholds))))
     if isinstance(model, BoucWen):
-        return model.linear_gain * u + model.a * bouc_wen_states(u, 1.0, model.beta, model.gamma, 0.0)
+        return model.linear_gain * u + model.a * bouc_wen_states(u, 1.0, model.beta, model.gamma, 0.0, model.exponent)
     if isinstance(model, Fckp):
         kp, p = model.kp, model.normalise(u)
         xi = kp_kernel_outputs(p, p[0], kp.rho1, kp.rho2, kp.delta, ridge(p[0] - kp.rho2, kp.delta))
@@ -185,7 +185,8 @@ def _build_generalised_pi(p: dict, sample_period: float):
 
 
 def _build_bouc_wen(p: dict, sample_period: float):
-    return BoucWen(float(p["linear_gain"]), float(p["a"]), float(p["beta"]), float(p["gamma"])), 0.0
+    return BoucWen(float(p["linear_gain"]), float(p["a"]), float(p["beta"]), float(p["gamma"]),
+                   float(p.get("exponent", 1.0))), 0.0
 
 
 def _build_parametric(p: dict, sample_period: float):
@@ -227,7 +228,7 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
     Family("generalised-pi", "Prandtl–Ishlinskii behind a monotone output curve (asymmetric, saturating)",
            _build_generalised_pi, generalised_pi_problem, {"plays": 8, "cells": 6},
            ("linear_gain", "thresholds", "weights", "output_values")),
-    Family("bouc-wen", "Bouc–Wen differential model (n = 1), exact between samples", _build_bouc_wen,
+    Family("bouc-wen", "Bouc–Wen differential model (exponent n >= 1 fitted)", _build_bouc_wen,
            bouc_wen_problem, {}, ("linear_gain", "a", "beta", "gamma")),
     Family("power-function", "zhou2024 polylines and power-function transitions", _build_power_function,
            power_function_problem, {"knots": 10, "ascending_s": (), "descending_s": ()},

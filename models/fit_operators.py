@@ -7,7 +7,7 @@ As in :mod:`hystmpc.models.fit_plays`, each returns a
 :class:`~hystmpc.models.record_fit.Problem` for the record; the output's scale (a gain, a
 stroke, Bouc–Wen's ``k`` and ``A``) is projected, the shape parameters are moved:
 
-* ``bouc-wen``: β and γ/β, from the best of a small grid;
+* ``bouc-wen``: β, γ/β and the exponent n, from the best of a small grid;
 * ``parametric``: log p1 and log p2, from the best of a grid over the input span;
 * ``kp``, ``fckp``: the density's ``c`` and ``σ``, both ends of the input range the threshold
   grid is laid on (unless given), and the creep order α (fckp);
@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from hystmpc.models.bouc_wen import MAX_EXPONENT
 from hystmpc.models.fractional import creep_integral
 from hystmpc.models.kp import paper_density, ridge, threshold_grid
 from hystmpc.models.linear_dynamics import LinearDynamics
@@ -38,10 +39,11 @@ def _best_start(problem: Problem, record: Record, starts) -> np.ndarray:
 
 
 def bouc_wen_problem(record: Record) -> Problem:
-    """``y = k·u + A·ζ(u; β, γ)``: ``log β`` and ``γ/β`` moved.
+    """``y = k·u + A·ζ(u; β, γ, n)``: ``log β^(1/n)``, ``γ/β`` and ``n`` moved.
 
-    ``k`` and ``A`` (either sign, the output monotone) projected on the columns ``u``, ``ζ`` and
-    ``m·u − ζ`` with non-negative weights, ``m = 2β/(β+γ)`` the largest ``dζ/du``.
+    ``β^(1/n)`` (1 / input unit) sets the loop's width whatever ``n``, so moving ``n`` keeps the
+    width. ``k`` and ``A`` (either sign, the output monotone) projected on the columns ``u``,
+    ``ζ`` and ``m·u − ζ`` with non-negative weights, ``m = 2β/(β+γ)`` the largest ``dζ/du``.
 
     Parameters
     ----------
@@ -51,8 +53,8 @@ def bouc_wen_problem(record: Record) -> Problem:
     Returns
     -------
     Problem
-        The fit problem, started at the best of a grid of β and γ/β; its parameters are
-        ``linear_gain``, ``a``, ``beta`` and ``gamma``.
+        The fit problem, started at the best of a grid of β, γ/β and n; its parameters are
+        ``linear_gain``, ``a``, ``beta``, ``gamma`` and ``exponent``.
     """
     u = record.u
     span = float(np.ptp(u))
@@ -60,24 +62,30 @@ def bouc_wen_problem(record: Record) -> Problem:
     def steepest(theta):
         return 2.0 / (1.0 + float(theta[1]))
 
+    def shape(theta):
+        n = float(theta[2])
+        beta = float(np.exp(theta[0] * n))
+        return beta, beta * float(theta[1]), n
+
     def columns(theta):
         from hystmpc.models.compiled import bouc_wen_states
-        beta = float(np.exp(theta[0]))
-        zeta = bouc_wen_states(u, 1.0, beta, beta * float(theta[1]), 0.0)
+        beta, gamma, n = shape(theta)
+        zeta = bouc_wen_states(u, 1.0, beta, gamma, 0.0, n)
         return np.column_stack((u, zeta, steepest(theta) * u - zeta))
 
     def parameters(theta, w):
-        beta = float(np.exp(theta[0]))
+        beta, gamma, n = shape(theta)
+        n = 1.0 if n < 1.0 + 1e-6 else n  # at its lower limit: the classical model, in closed form
         a = float(w[1] - w[2])
         if a == 0:  # no loop at all: the smallest one the model takes
             a = 1e-12 * max(float(np.max(w)), 1e-300)
-        return {"linear_gain": float(w[0] + w[2] * steepest(theta)), "a": a, "beta": beta,
-                "gamma": beta * float(theta[1])}
-    problem = Problem([(np.arange(2), columns)], np.zeros(2), np.array([np.log(0.01 / span), -0.95]),
-                      np.array([np.log(1e4 / span), 0.95]), np.ones(3, bool), parameters,
-                      names=("beta", "gamma / beta"))
-    problem.theta = _best_start(problem, record, [(np.log(b / span), g) for b in (1.0, 3.0, 10.0, 30.0, 100.0)
-                                                  for g in (-0.5, 0.0, 0.5)])
+        return {"linear_gain": float(w[0] + w[2] * steepest(theta)), "a": a, "beta": beta, "gamma": gamma,
+                "exponent": n}
+    problem = Problem([(np.arange(3), columns)], np.zeros(3), np.array([np.log(0.01 / span), -0.95, 1.0]),
+                      np.array([np.log(1e4 / span), 0.95, MAX_EXPONENT]), np.ones(3, bool), parameters,
+                      names=("beta^(1/n)", "gamma / beta", "exponent"), limit_below=(2,))
+    problem.theta = _best_start(problem, record, [(np.log(b / span), g, n) for b in (1.0, 3.0, 10.0, 30.0, 100.0)
+                                                  for g in (-0.5, 0.0, 0.5) for n in (1.0, 2.0)])
     return problem
 
 

@@ -29,7 +29,6 @@ import numpy as np
 
 from hystmpc.models.base import (
     SteppedModel,
-    bisection_inverse,
     builtin_max,
     builtin_min,
     check_smoothing,
@@ -37,6 +36,7 @@ from hystmpc.models.base import (
     smooth_function,
     symbolic,
 )
+from hystmpc.models.inverse_search import bisection_inverse
 from hystmpc.models.smooth import smooth_clip, smooth_max, smooth_min
 
 
@@ -276,7 +276,7 @@ class Preisach(SteppedModel):
 
         Found along a monotone move (exact: the output is piecewise linear and monotone along the
         move). A target beyond the model's reach gives the input where the output stops changing.
-        On CasADi expressions: bisection (:func:`hystmpc.models.base.bisection_inverse`).
+        On CasADi expressions: bisection (:func:`hystmpc.models.inverse_search.bisection_inverse`).
 
         Parameters
         ----------

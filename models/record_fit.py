@@ -232,7 +232,7 @@ def project_normal(FtF, Fty, sum_f, sum_y: float, n: int, nonneg: np.ndarray, pe
     tuple
         ``(w, c)``: the weights (ndarray) and the offset (float), as :func:`project` gives them.
     """
-    from scipy.linalg import cho_factor, cho_solve, solve_triangular
+    from scipy.linalg import cho_solve, solve_triangular
     from scipy.optimize import nnls
 
     if len(Fty) == 0:
@@ -248,11 +248,11 @@ def project_normal(FtF, Fty, sum_f, sum_y: float, n: int, nonneg: np.ndarray, pe
     if penalty is not None and len(penalty):
         P = penalty / scale
         G = G + P.T @ P
-    G[np.diag_indices_from(G)] += 1e-10 * max(float(np.trace(G)), 1e-300) / len(G)
+    factor = _factor(G)
     if not np.any(nonneg):
-        v = cho_solve(cho_factor(G), b)
+        v = cho_solve(factor, b)
     else:
-        R = np.triu(cho_factor(G, lower=False)[0])
+        R = np.triu(factor[0])
         target = solve_triangular(R, b, trans="T")
         free = ~nonneg
         if np.any(free):  # free weights: two non-negative halves
@@ -264,6 +264,26 @@ def project_normal(FtF, Fty, sum_f, sum_y: float, n: int, nonneg: np.ndarray, pe
             v = nnls(R, target, maxiter=50 * R.shape[1])[0]
     w = v / scale
     return w, mean_y - float(mean_f @ w)
+
+
+def _factor(G: np.ndarray) -> tuple:
+    """Cholesky factor (upper) of the scaled normal matrix ``G`` with a small ridge.
+
+    The ridge starts at 1e-10 of the mean diagonal and grows a hundredfold while rounding
+    (nearly collinear columns, the mean removed by subtraction) leaves ``G`` indefinite.
+    """
+    from scipy.linalg import LinAlgError, cho_factor
+
+    trace = max(float(np.trace(G)), 1e-300)
+    for ridge in (1e-10, 1e-8, 1e-6, 1e-4):
+        ridged = G.copy()
+        ridged[np.diag_indices_from(ridged)] += ridge * trace / len(G)
+        try:
+            return cho_factor(ridged, lower=False)
+        except LinAlgError:
+            continue
+    ridged[np.diag_indices_from(ridged)] += 1e-2 * trace / len(G)
+    return cho_factor(ridged, lower=False)
 
 
 # ----- a family's problem -----------------------------------------------------------------------------
@@ -295,6 +315,9 @@ class Problem:
     carries it (fckp's, inside the creep)."""
     iterations: int = 30
     """Gauss–Newton steps a refinement takes at most."""
+    limit_below: tuple[int, ...] = ()
+    """Entries of ``theta`` whose lower bound is the model's own limit, not a search bound
+    (Bouc–Wen's ``n = 1``, the classical model): ending there gives no warning."""
     joint_hold: tuple[int, ...] = ()
     """Entries of ``theta`` the joint refinement with a linear block leaves where the static one
     put them (every group depends on them: a Preisach grid's ends)."""
@@ -446,7 +469,7 @@ def with_creep(problem: Problem, record: Record) -> Problem:
                    np.append(problem.nonneg, False), parameters, problem.penalty and (lambda t: np.hstack((
                        problem.penalty(t[:-1]), np.zeros((len(problem.penalty(t[:-1])), 1))))),
                    names=(*problem.names, "creep_order"), intercept=False, iterations=problem.iterations,
-                   joint_hold=problem.joint_hold)
+                   joint_hold=problem.joint_hold, limit_below=problem.limit_below)
 
 
 @dataclass
@@ -549,7 +572,9 @@ def refine(problem: Problem, record: Record, block: LinearDynamics, move_block: 
     fit = evaluate(problem, theta, blk, record)
     z = z0.copy()
     z[free] = z_free
-    near = free & ((np.abs(z - lower) < 1e-6 * width) | (np.abs(upper - z) < 1e-6 * width)) & (width > 0)
+    at_lower = np.abs(z - lower) < 1e-6 * width
+    at_lower[list(problem.limit_below)] = False
+    near = free & (at_lower | (np.abs(upper - z) < 1e-6 * width)) & (width > 0)
     names = list(problem.names) + (["time_constant"] if kind == "first-order" else
                                    ["natural_frequency_hz", "damping"] if kind == "second-order" else [])
     fit.at_bounds = tuple(names[i] if i < len(names) else f"parameter {i}" for i in np.flatnonzero(near))

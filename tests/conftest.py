@@ -30,3 +30,15 @@ def private_cache(tmp_path_factory):
     from hystmpc.mpc.codegen import cache_dir
     os.environ["HYSTMPC_CACHE"] = str(cache_dir())
     os.environ["HYSTMPC_CACHE_DIR"] = str(tmp_path_factory.mktemp("cache"))
+
+
+def numpy_uses_the_c_library(name: str) -> bool:
+    """Whether NumPy's float64 ``name`` (``exp``, ``log`` or ``power``) on arrays returns
+    ``math``'s results bit for bit. On AVX-512 machines NumPy has its own vectorised versions,
+    within an ulp of the C library's but not equal to them."""
+    import math
+
+    x = np.random.default_rng(0).uniform(0.1, 20.0, 4000)
+    if name == "power":
+        return bool(np.array_equal(np.power(x, 0.25), [math.pow(v, 0.25) for v in x]))
+    return bool(np.array_equal(getattr(np, name)(x), [getattr(math, name)(v) for v in x]))

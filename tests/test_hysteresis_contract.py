@@ -75,6 +75,7 @@ PREISACH = Preisach((0.5, 1.5, 3.0), (-2.0, -1.0, 0.0, 1.0, 2.0, 3.0),
                     tuple(map(tuple, RNG(0).uniform(0.05, 1.0, (4, 5)))))
 GPI = GeneralisedPI(0.5, (0.5, 1.5), (0.3, 0.2), (-2.0, 0.0, 1.0, 3.0), (-1.0, 0.0, 2.0, 2.5))
 BOUC_WEN = BoucWen(0.9, -0.5, 0.8, 0.2)  # the piezo form (A < 0)
+BOUC_WEN_POWER = BoucWen(0.9, -0.5, 0.8, 0.2, 1.6)
 
 CASES = [
     Case("maxwell-slip", MS, _walk(7, 400, 2.5), RNG(3).uniform(-0.99, 0.99, 200) * MS.saturation,
@@ -119,6 +120,8 @@ CASES = [
          lambda eps, n: 2.0 * (n * 2 * eps / 2) + 2 * eps, 1e-9, {"eps": 1e-2, "h": 1e-6, "rtol": 1e-5, "atol": 1e-6}),
     # O(eps), the direction and the side of zeta = 0 blended (the model's docstring)
     Case("bouc-wen", BOUC_WEN, _walk(8, 400, 0.3), _walk(9, 200, 0.5), (1e-2, 1e-3, 1e-4),
+         lambda eps, n: 0.25 * eps, 1e-9, {"eps": 1e-2, "h": 1e-7, "rtol": 1e-4, "atol": 1e-5}),
+    Case("bouc-wen-exponent", BOUC_WEN_POWER, _walk(8, 400, 0.3), _walk(9, 200, 0.5), (1e-2, 1e-3, 1e-4),
          lambda eps, n: 0.25 * eps, 1e-9, {"eps": 1e-2, "h": 1e-7, "rtol": 1e-4, "atol": 1e-5}),
     Case("offset-preisach", Offset(PREISACH, 0.7, -3.0), _walk(8, 400, 0.5), _walk(9, 200, 0.8, -1.0),
          (1e-2, 1e-3, 1e-4), lambda eps, n: (n * eps / 2 + eps / 2) * float(np.sum(PREISACH.density)), 1e-9,
@@ -250,3 +253,40 @@ def test_models_without_direction_detection_reject_direction_eps(model):
 def test_smooth_step_rejects_a_bad_width(case, eps):
     with pytest.raises(ValueError, match="eps must be"):
         case.model.smooth_step(eps)
+
+
+def _bouc_wen_integrated(model: BoucWen, u: np.ndarray, pieces: int = 200) -> np.ndarray:
+    """Bouc–Wen's output along ``u`` with the equation integrated finely (classical RK4 in the input)."""
+    beta, gamma, n = model.beta, model.gamma, model.exponent
+
+    def rate(z, s):
+        return 1.0 - (beta * s * np.sign(z) + gamma) * abs(z) ** n
+    z, last, out = 0.0, u[0], []
+    for v in u:
+        h, s = (v - last) / pieces, np.sign(v - last)
+        for _ in range(pieces if v != last else 0):
+            k1 = rate(z, s)
+            k2 = rate(z + h / 2 * k1, s)
+            k3 = rate(z + h / 2 * k2, s)
+            z += h * (k1 + 2 * k2 + 2 * k3 + rate(z + h * k3, s)) / 6
+        last = v
+        out.append(model.linear_gain * v + model.a * z)
+    return np.asarray(out)
+
+
+@pytest.mark.parametrize("exponent, tolerance", [(1.05, 3e-4), (1.2, 3e-4), (1.6, 3e-4), (2.5, 3e-4), (3.0, 3e-4),
+                                                 (4.0, 1e-3)])
+def test_bouc_wen_with_an_exponent_follows_its_equation_whatever_the_sampling(exponent, tolerance):
+    """The module's claim: within 3e-4 of the output's span of the equation integrated finely
+    (1e-3 for n = 4), on slow moves, a sine and jumps of several loop widths a sample, and
+    nearly the same output when the same path is sampled ten times finer."""
+    scale = 8.0 ** (1 - exponent)  # loop widths comparable across exponents
+    model = BoucWen(0.8, -0.5, 0.3 * scale, 0.1 * scale, exponent)
+    rng = RNG(0)
+    u = np.concatenate((np.cumsum(rng.normal(0, 0.3, 600)), 20 * np.sin(np.linspace(0, 30, 400)),
+                        np.repeat(rng.uniform(-30, 30, 20), 10)))
+    y = model.simulate(u)[0]
+    span = np.ptp(y)
+    assert np.max(np.abs(y - _bouc_wen_integrated(model, u))) <= tolerance * span
+    fine = np.interp(np.arange(10 * (len(u) - 1) + 1) / 10, np.arange(len(u)), u)
+    assert np.max(np.abs(model.simulate(fine)[0][::10] - y)) <= tolerance * span

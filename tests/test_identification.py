@@ -3,6 +3,7 @@
 the command line reports, warns and refuses as interface.md says."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -71,7 +72,7 @@ TRUTHS = {  # family: (truth, creep order, input range, noise std); no threshold
                  (0.0, 100.0), 0.01),
     "generalised-pi": (GeneralisedPI(0.3, (0.7, 2.3, 4.1), (0.2, 0.3, 0.2), (-1, 2, 5, 8, 12), (0, 1.5, 4, 5, 5.5)),
                        0.0, (0.0, 10.0), 0.005),
-    "bouc-wen": (BoucWen(0.3, -0.1, 0.05, 0.02), 0.0, (0.0, 100.0), 0.01),
+    "bouc-wen": (BoucWen(0.3, -0.1, 0.05**1.7, 0.4 * 0.05**1.7, 1.7), 0.0, (0.0, 100.0), 0.01),
     "parametric": (Scaled(ParametricHysteresis(0.8, 1.5), 1.2), 0.0, (0.0, 10.0), 0.01),
     "kp": (Fckp(FckpParams(density_c=2.4, density_sigma=0.8, creep_order=0.0, sample_period=DT, u_min=-3, u_max=12)),
            0.0, (0.0, 10.0), 0.005),
@@ -103,6 +104,23 @@ def test_each_family_predicts_a_record_of_itself_to_the_noise(family, alignment)
     assert rmse <= 1.1 * noise, (rmse, noise)
 
 
+def test_bouc_wen_at_exponent_one_is_the_closed_form_without_a_bound_warning():
+    """Data of the classical model (n = 1): the fit ends at or near the exponent's lower limit,
+    writes exactly 1 there (the closed form, not the pieces) and warns of no bound; the
+    piezo example's record takes it to the limit itself."""
+    truth = BoucWen(0.3, -0.1, 0.05, 0.02)
+    u = fit_input(0.0, 100.0)
+    fitted = identify("bouc-wen", u, measured(truth, 0.0, u, 0.01, 1), DT)
+    exponent = fitted.parameters["exponent"]
+    assert exponent == 1.0 or 1.0 + 1e-6 < exponent < 1.01
+    assert "exponent" not in fitted.notes["at_bounds"]
+    example = Path(__file__).parents[1] / "docs" / "examples" / "piezo" / "slow.csv"
+    data = np.loadtxt(example, delimiter=",", skiprows=1)
+    at_limit = identify("bouc-wen", data[:, 1], data[:, 2], DT)
+    assert at_limit.parameters["exponent"] == 1.0
+    assert "exponent" not in at_limit.notes["at_bounds"]
+
+
 def test_the_families_are_all_tested():
     assert set(TRUTHS) == set(FAMILIES)
 
@@ -110,9 +128,10 @@ def test_the_families_are_all_tested():
 @pytest.mark.parametrize("model", [
     PrandtlIshlinskii(0.05, (7.3, 21.1), (0.04, 0.03)), MaxwellSlip((0.5, 0.3), (0.2, 0.4)), TRUTHS["preisach"][0],
     TRUTHS["generalised-pi"][0], BoucWen(0.3, -0.1, 0.05, 0.02), BoucWen(0.0, 1.0, 0.05, -0.02),
-    Scaled(ParametricHysteresis(0.8, 1.5), 1.2), PowerFunctionHysteresis(),
+    TRUTHS["bouc-wen"][0], Scaled(ParametricHysteresis(0.8, 1.5), 1.2), PowerFunctionHysteresis(),
     Fckp(FckpParams(u_min=-150.0, u_max=150.0, creep_order=0.0))],
-    ids=["pi", "ms", "preisach", "gpi", "bouc-wen-piezo", "bouc-wen", "parametric", "power-function", "kp-bipolar"])
+    ids=["pi", "ms", "preisach", "gpi", "bouc-wen-piezo", "bouc-wen", "bouc-wen-exponent", "parametric",
+         "power-function", "kp-bipolar"])
 def test_compiled_recursions_equal_the_exact_steps(model):
     span = 0.046 if isinstance(model, PowerFunctionHysteresis) else 150.0 if isinstance(model, Fckp) else 10.0
     rng = np.random.default_rng(3)
