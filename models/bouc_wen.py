@@ -13,17 +13,21 @@ input's direction ``σ`` fixed over a move, ``dζ/du = 1 − (βσ + γ sgn ζ)�
 side of ``ζ = 0``, so a move of any size has a closed form (an exponential approach to
 ``±1/(β ± γ)``, with the crossing of ``ζ = 0`` found exactly). The step is that closed form;
 the loop does not depend on how finely the input is sampled. Along a monotone move the
-output is monotone and smooth, so the inverse is a modified regula falsi (the Illinois
-method).
+output is monotone and smooth, so the inverse is a few halvings and then a modified regula
+falsi (the Illinois method).
 
 For ``n != 1`` there is no closed form. A move is cut in :data:`SUBSTEPS` equal pieces
 ``h``, each an exponential Euler step ``ζ + h·φ1(h·f′)·f`` of ``dζ/du = f(ζ)``, ``φ1(x) =
-(e^x − 1)/x``: ``h·f′ <= 0`` on both sides of zero, so a move of any size stays bounded, and
-a large one converges to ``ζ``'s bound as Newton's method would. The step is the same
-arithmetic in NumPy (:func:`~hystmpc.models.compiled.bouc_wen_advance_power`) and on CasADi
-expressions, so a generated controller repeats it. Against the equation integrated finely it
-errs by at most 3e-4 of the output's span for ``n <= 3`` and 1e-3 for ``n <= 4``, on slow
-moves, a sine and jumps of several loop widths a sample (``tests/test_hysteresis_contract.py``).
+(e^x − 1)/x``, clipped to ``ζ``'s bound: ``h·f′ <= 0`` on both sides of zero, and a long
+move converges to the bound as Newton's method would. The step is the same arithmetic in
+NumPy (:func:`~hystmpc.models.compiled.bouc_wen_advance_power`) and on CasADi expressions, so
+a generated controller repeats it; it is a discretisation, not the equation's exact flow.
+Measured on the loop alone (the error over the span of ``A·ζ``, against the equation
+integrated finely, on slow moves, a sine and jumps of several loop widths a sample): 0.07–0.16 %
+for ``γ/β = 1/3`` and ``n <= 2.5`` (0.45 % at ``n = 4``), but 0.3–3.5 % for ``γ/β = −0.5`` and
+2.4–10 % for ``γ/β = −0.9``, where the slope ``f′`` jumps as ``ζ`` crosses zero inside a piece
+(a piece is not split there; ``tests/test_hysteresis_contract.py``). The same path sampled ten
+times finer gives the same figures: the error is the pieces', not the sampling's.
 
 State: ``[u_last, ζ]``; relaxed at ``u0`` means ``ζ = 0``.
 """
@@ -39,7 +43,7 @@ from hystmpc.models.base import SteppedModel, check_smoothing, smooth_function, 
 from hystmpc.models.inverse_search import illinois_inverse
 
 
-def _phi1(x):
+def _exp_ratio(x):
     """``(e^x − 1)/x`` on CasADi expressions (its series near 0, as in the compiled step)."""
     small = ca.fabs(x) < 1e-6
     safe = ca.if_else(small, 1.0, x)
@@ -193,6 +197,7 @@ class BoucWen(SteppedModel):
         derivative)``, or smoothed ones.
         """
         n, h = self.exponent, du / SUBSTEPS
+        bound = (self.beta + self.gamma) ** (-1.0 / n)
         for _ in range(SUBSTEPS):
             sign, dsign = side(z)
             m, dm = magnitude(z)
@@ -200,7 +205,7 @@ class BoucWen(SteppedModel):
             w = m ** (n - 1.0)
             rate = 1.0 - c * w * m
             slope = -(self.beta * s * dsign * w * m + n * c * w * dm)
-            z = z + h * _phi1(h * slope) * rate
+            z = ca.fmin(ca.fmax(z + h * _exp_ratio(h * slope) * rate, -bound), bound)
         return z
 
     def smooth_step(self, eps: float, direction_eps: float | None = None) -> ca.Function:

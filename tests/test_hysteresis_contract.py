@@ -274,14 +274,15 @@ def _bouc_wen_integrated(model: BoucWen, u: np.ndarray, pieces: int = 200) -> np
     return np.asarray(out)
 
 
-@pytest.mark.parametrize("exponent, tolerance", [(1.05, 3e-4), (1.2, 3e-4), (1.6, 3e-4), (2.5, 3e-4), (3.0, 3e-4),
-                                                 (4.0, 1e-3)])
-def test_bouc_wen_with_an_exponent_follows_its_equation_whatever_the_sampling(exponent, tolerance):
-    """The module's claim: within 3e-4 of the output's span of the equation integrated finely
-    (1e-3 for n = 4), on slow moves, a sine and jumps of several loop widths a sample, and
-    nearly the same output when the same path is sampled ten times finer."""
+@pytest.mark.parametrize("exponent, asymmetry, tolerance", [
+    (1.05, 1 / 3, 2e-3), (1.2, 1 / 3, 2e-3), (1.6, 1 / 3, 2e-3), (2.5, 1 / 3, 2e-3), (4.0, 1 / 3, 5e-3),
+    (1.2, -0.5, 4e-3), (1.2, -0.9, 3e-2), (2.5, -0.9, 7e-2)])
+def test_bouc_wen_with_an_exponent_follows_its_equation_whatever_the_sampling(exponent, asymmetry, tolerance):
+    """The module's figures, on the loop alone (``k = 0``: the error over the span of ``A·ζ``):
+    against the equation integrated finely, on slow moves, a sine and jumps of several loop
+    widths a sample, and against the same path sampled ten times finer."""
     scale = 8.0 ** (1 - exponent)  # loop widths comparable across exponents
-    model = BoucWen(0.8, -0.5, 0.3 * scale, 0.1 * scale, exponent)
+    model = BoucWen(0.0, 1.0, 0.3 * scale, asymmetry * 0.3 * scale, exponent)
     rng = RNG(0)
     u = np.concatenate((np.cumsum(rng.normal(0, 0.3, 600)), 20 * np.sin(np.linspace(0, 30, 400)),
                         np.repeat(rng.uniform(-30, 30, 20), 10)))
@@ -290,3 +291,25 @@ def test_bouc_wen_with_an_exponent_follows_its_equation_whatever_the_sampling(ex
     assert np.max(np.abs(y - _bouc_wen_integrated(model, u))) <= tolerance * span
     fine = np.interp(np.arange(10 * (len(u) - 1) + 1) / 10, np.arange(len(u)), u)
     assert np.max(np.abs(model.simulate(fine)[0][::10] - y)) <= tolerance * span
+
+
+@pytest.mark.parametrize("exponent", [1.2, 2.5, 4.0])
+def test_bouc_wen_stays_within_its_bound_on_any_jump(exponent):
+    model = BoucWen(0.0, 1.0, 1.0, 0.0, exponent)  # the bound is 1
+    for jump in (0.5, 50.0, 1000.0, -1000.0):
+        zeta = model.step(model.initial_state(0.0), jump)[0][1]
+        assert abs(zeta) <= 1.0 and (abs(jump) < 10 or abs(zeta) > 1 - 1e-9), (jump, zeta)
+
+
+@pytest.mark.parametrize("exponent", [1.0, 1.2, 4.0])
+def test_bouc_wen_inverse_reaches_targets_near_a_saturated_loop(exponent):
+    """The textbook form without a reversible slope (``k = 0``): targets up to 1e-4 of the
+    loop's reach from its asymptote, from states all over the loop."""
+    model = BoucWen(0.0, 1.0, 1.0, 0.5, exponent)
+    bound = 1.5 ** (-1 / exponent)
+    rng, state = RNG(4), model.initial_state(0.0)
+    for _ in range(60):
+        state, _ = model.step(state, float(rng.normal(0, 3 * bound)))
+        target = float(np.sign(rng.normal()) * bound * (1 - 10 ** -rng.uniform(0.5, 4)))
+        _, u = model.inverse_step(state, target)
+        assert model.step(state, u)[1] == pytest.approx(target, abs=1e-9 * bound)
