@@ -7,8 +7,10 @@ From one file hystmpc builds, for every command that takes a bench:
   discretisation), with the dead time;
 * the **controllers**: ``nmpc``, and the baselines ``pid`` and ``inverse-ff-pid``, whose
   gains are tuned automatically on the tuning ensemble (:mod:`hystmpc.experiments.tuning`,
-  :meth:`ActuatorSpec.tuning_ensemble`), and ``inverse-lmpc``, the inverse model in series
-  with the input and a linear MPC on the linear block, whose rate weight is tuned the same way;
+  :meth:`ActuatorSpec.tuning_ensemble`), behind a notch on the command where the linear
+  block is a lightly damped mode (:meth:`ActuatorSpec.command_notch`), and ``inverse-lmpc``,
+  the inverse model in series with the input and a linear MPC on the linear block, whose
+  rate weight is tuned the same way;
 * a **simulated plant**: the exact, non-smooth model (or, with ``plant.truth = runner-up``,
   the model and the runner-up family of an ``identify auto`` ranking in parallel, blended by
   what the model missed on the validation record), every parameter perturbed by a seeded
@@ -36,6 +38,7 @@ from hystmpc.experiments.actuator_groups import ActuatorModel, ActuatorPlant, pa
 from hystmpc.experiments.baselines import (
     FeedforwardPidGains,
     InverseCompensation,
+    ModeNotch,
     PidController,
     PidGains,
     inverse_feedforward_pid,
@@ -56,6 +59,8 @@ LOG = logging.getLogger("hystmpc")
 _WARNED: set[str] = set()
 """Warnings already given, once per file and process (the output range beyond the model's
 reach: the path; a linear block above Nyquist: the path with "#nyquist")."""
+NOTCH_DAMPING = 0.7
+"""The PID baselines' notch replaces a mode damped less than this by one damped this much."""
 GROUP_TABLES = ("nmpc", "smoothing", "solver", "pid", "inverse_ff_pid", "lmpc")
 """Optional tables that set the groups of the same name (as ``--set`` would)."""
 TABLES = {
@@ -506,11 +511,36 @@ class ActuatorSpec:
         """
         model: ActuatorModel = config["model"]
         gains = gains if gains is not None else config["inverse_ff_pid" if feedforward else "pid"]
+        notch = self.command_notch(model)
         if not feedforward:
-            return PidController(gains, self.sample_period, self.input_bounds, rate=self.input_rate)
+            return PidController(gains, self.sample_period, self.input_bounds, rate=self.input_rate,
+                                 command_filter=notch)
         hysteresis, _ = self.hysteresis(model)
         return inverse_feedforward_pid(hysteresis, gains, self.sample_period, self.input_bounds,
-                                       preview=gains.preview, rate=self.input_rate)
+                                       preview=gains.preview, rate=self.input_rate, command_filter=notch)
+
+    def command_notch(self, model: ActuatorModel) -> ModeNotch | None:
+        """The PID baselines' notch on the command, where the model's mode is lightly damped.
+
+        A second-order block with damping below :data:`NOTCH_DAMPING` rings at every step
+        of the command, whatever the PID's gains; an engineer puts a notch at the mode in front
+        of such an actuator. The notch replaces the model's mode by one damped at
+        :data:`NOTCH_DAMPING` (:class:`~hystmpc.experiments.baselines.ModeNotch`).
+
+        Parameters
+        ----------
+        model : ActuatorModel
+            The ``model`` group.
+
+        Returns
+        -------
+        ModeNotch or None
+            The notch, or None (no second-order block, or one damped at least that much).
+        """
+        block = model.dynamics
+        if block.kind != "second-order" or block.damping >= NOTCH_DAMPING:
+            return None
+        return ModeNotch(block, self.sample_period, NOTCH_DAMPING)
 
     def _estimator_noise(self) -> float:
         """The sensor noise the NMPC's EKF and inverse-lmpc's Kalman filter are tuned for.

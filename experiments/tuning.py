@@ -173,7 +173,7 @@ def tune_pid(build: Callable[[PidGains], object], plant, scenarios: list[Scenari
     return gains_of(best.x), float(best.fun)
 
 
-TUNING_RULE = "mean-rmse-ensemble-rings-below-3/9"
+TUNING_RULE = "mean-rmse-ensemble-rings-below-3-mode-notch/10"
 """Names the tuning rule in the cache key: change it when the rule changes."""
 
 LMPC_RATE_FACTORS = (0.01, 0.1, 1.0, 10.0, 100.0, 1e3, 1e4)

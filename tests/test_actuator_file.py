@@ -45,14 +45,17 @@ def test_identified_model_fits_the_records(piezo):
 
 
 @pytest.mark.slow  # 7-12 s: tunes the baselines and compares (CI runs it)
-def test_nmpc_halves_the_error_of_inverse_feedforward_pid(piezo, capsys):
+def test_nmpc_beats_inverse_feedforward_pid_behind_its_notch(piezo, capsys):
+    """Measured 0.73 x on the sine, 0.55 x on the staircase (0.28 / 0.42 x before the
+    baselines had their notch at the mode); 0.8 x is the bar an NMPC must clear to be worth it."""
     out = piezo / "compare"
     assert main(["compare", str(piezo / "piezo.toml"), "--out", str(out), "--no-plots"]) == 0
     runs = {(r["scenario"], r["controller"]): r for r in json.loads((out / "results.json").read_text())["runs"]}
     for scenario in ("sine", "staircase"):
         nmpc, ff = runs[scenario, "nmpc"]["metrics"]["rmse"], runs[scenario, "inverse-ff-pid"]["metrics"]["rmse"]
         assert runs[scenario, "nmpc"]["solver"]["failures"] == 0
-        assert nmpc <= 0.5 * ff, (scenario, nmpc, ff)
+        assert nmpc <= 0.8 * ff, (scenario, nmpc, ff)
+        assert runs[scenario, "inverse-ff-pid"]["metrics"]["oscillation_cycles"] < 3
     gains = runs["sine", "pid"]["parameters"]["pid"]
     assert gains["ki"] > 0  # tuned, not the zero default
 
@@ -235,3 +238,47 @@ def test_set_cannot_change_the_dynamics_kind_or_give_another_kinds_parameters(pi
     with pytest.raises(ValueError, match=r"second-order dynamics \(the file's \[dynamics\]\) have no time_constant"):
         bench.configure(["model.dynamics.time_constant=0.02"], tuned=False)
     assert bench.configure(["model.dynamics.damping=0.3"], tuned=False)["model"].dynamics.damping == 0.3
+
+
+def test_a_mode_notch_makes_a_step_of_the_command_reach_the_output_without_ringing():
+    """The notch's zeros are the model's mode under a hold: notch then mode is the same
+    mode damped at 0.7 (to rounding), static gain 1, at rest at its first input."""
+    import numpy as np
+    from scipy.signal import lfilter
+
+    from hystmpc.experiments.baselines import ModeNotch
+    from hystmpc.models.linear_dynamics import LinearDynamics
+    dt = 5e-4
+    mode = LinearDynamics("second-order", natural_frequency_hz=180.0, damping=0.08)
+    notch = ModeNotch(mode, dt)
+    u = np.concatenate((np.full(10, 2.0), np.full(400, 5.0), 3.0 + np.sin(0.05 * np.arange(300))))
+    filtered = np.array([notch(v) for v in u])
+    assert np.all(filtered[:10] == 2.0)
+    b, a = mode.zoh_filter(dt)
+    damped = LinearDynamics("second-order", natural_frequency_hz=180.0, damping=0.7).zoh_filter(dt)[1]
+    gain = damped.sum() / a.sum()
+    through_mode = lfilter(b, a, filtered - 2.0) + 2.0
+    assert np.max(np.abs(through_mode - (lfilter(gain * b, damped, u - 2.0) + 2.0))) < 1e-9
+    plain = lfilter(b, a, u - 2.0) + 2.0
+    assert plain[:410].max() > 2.0 + 1.7 * 3.0  # the mode alone overshoots the step by 70 %
+    assert through_mode[:410].max() < 2.0 + 1.06 * 3.0 and abs(through_mode[409] - 5.0) < 1e-6
+    notch.reset()
+    assert notch(7.0) == 7.0
+    with pytest.raises(ValueError, match="second-order"):
+        ModeNotch(LinearDynamics("first-order", time_constant=0.01), dt)
+
+
+def test_the_pid_baselines_get_a_notch_only_for_a_lightly_damped_mode(piezo):
+    import dataclasses
+
+    from hystmpc.experiments.actuator_file import NOTCH_DAMPING, ActuatorSpec
+    spec = ActuatorSpec(piezo / "piezo.toml")
+    model = spec.bench().configure(tuned=False)["model"]
+    assert model.dynamics.kind == "second-order" and model.dynamics.damping < NOTCH_DAMPING
+    config = {"model": model, "pid": spec.bench().configure(tuned=False)["pid"],
+              "inverse_ff_pid": spec.bench().configure(tuned=False)["inverse_ff_pid"]}
+    for feedforward in (False, True):
+        assert spec.build_pid(config, feedforward).pid.command_filter is not None
+    for block in (dataclasses.replace(model.dynamics, damping=NOTCH_DAMPING),
+                  dataclasses.replace(model.dynamics, kind="first-order")):
+        assert spec.command_notch(dataclasses.replace(model, dynamics=block)) is None

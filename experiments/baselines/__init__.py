@@ -5,7 +5,8 @@ For any actuator:
 * :mod:`~hystmpc.experiments.baselines.pid`: :class:`PidController` (PID on the tracking error,
   optionally with a feed-forward term), :class:`InverseFeedforward` (the inverse hysteresis
   model turns the reference into an input; zhou2024 Fig. 14) and :func:`inverse_feedforward_pid`
-  (the two together, the usual scheme for an actuator with hysteresis);
+  (the two together, the usual scheme for an actuator with hysteresis), and :class:`ModeNotch`
+  (a filter on their command that damps the model's lightly damped mode);
 * :mod:`~hystmpc.experiments.baselines.compensation`: :class:`HysteresisCompensation` (vo2012
   Fig. 1), and :class:`AdditiveCompensation` and :class:`InverseCompensation`, the two ways an
   inverse model sits in front of the linear MPC of ``inverse-lmpc``
@@ -30,6 +31,7 @@ from hystmpc.experiments.baselines.pid import (
     Feedforward,
     FeedforwardPidGains,
     InverseFeedforward,
+    ModeNotch,
     Pid,
     PidController,
     PidGains,
@@ -39,5 +41,5 @@ from hystmpc.experiments.baselines.reluctance_inverses import HystInverse, PolyI
 from hystmpc.experiments.baselines.replay import Replay
 
 __all__ = ["AdditiveCompensation", "Feedforward", "HystInverse", "HysteresisCompensation", "InverseCompensation",
-           "FeedforwardPidGains", "InverseFeedforward", "Pid", "PidController", "PidGains", "PolyInverse", "Replay",
-           "inverse_feedforward_pid"]
+           "FeedforwardPidGains", "InverseFeedforward", "ModeNotch", "Pid", "PidController", "PidGains", "PolyInverse",
+           "Replay", "inverse_feedforward_pid"]

@@ -4,18 +4,21 @@ This is the usual scheme for an actuator with hysteresis (zhou2024 Fig. 14).
 
 * :class:`PidController`: PID on the tracking error, optionally plus a feed-forward term;
 * :class:`InverseFeedforward`: the inverse hysteresis model turns the reference into an input;
-* :func:`inverse_feedforward_pid` puts the two together for any model that has an inverse.
+* :func:`inverse_feedforward_pid` puts the two together for any model that has an inverse;
+* :class:`ModeNotch`: a filter on the command that damps a lightly damped mode of the model, as
+  the notch filters of piezo-stage servo controllers do.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol
 
 import numpy as np
 
 from hystmpc.models.base import HysteresisModel
+from hystmpc.models.linear_dynamics import LinearDynamics
 
 
 @dataclass(frozen=True)
@@ -54,21 +57,27 @@ class Pid:
         ``(lo, hi)``: the output's bounds.
     rate : float, optional
         Largest output change per sample (default: none).
+    command_filter : ModeNotch, optional
+        Filters ``ff + kp e + I + kd ė_f`` before the clip.
     """
 
-    def __init__(self, gains: PidGains, dt: float, limits: tuple[float, float], rate: float = np.inf):
+    def __init__(self, gains: PidGains, dt: float, limits: tuple[float, float], rate: float = np.inf,
+                 command_filter: ModeNotch | None = None):
         self.gains = gains
         self.dt = dt
         self.lo, self.hi = limits
         self.rate = rate
+        self.command_filter = command_filter
         self.reset()
 
     def reset(self) -> None:
-        """Clear the integrator and the derivative filter."""
+        """Clear the integrator, the derivative filter and the command filter."""
         self._integral = 0.0
         self._last_error = None
         self._derivative = 0.0
         self._last_output = None
+        if self.command_filter is not None:
+            self.command_filter.reset()
 
     def update(self, error: float, feedforward: float = 0.0) -> float:
         """Output for this sample's error.
@@ -98,9 +107,54 @@ class Pid:
             lo, hi = max(lo, self._last_output - self.rate), min(hi, self._last_output + self.rate)
         if lo <= u <= hi or np.sign(error) != np.sign(u - 0.5 * (lo + hi)):
             self._integral = integral
-        self._last_output = float(np.clip(feedforward + g.kp * error + self._integral + g.kd * self._derivative,
-                                          lo, hi))
+        command = feedforward + g.kp * error + self._integral + g.kd * self._derivative
+        if self.command_filter is not None:
+            command = self.command_filter(command)
+        self._last_output = float(np.clip(command, lo, hi))
         return self._last_output
+
+
+class ModeNotch:
+    """A filter on the command that replaces a lightly damped mode by a damped one.
+
+    ``N(z) = g · a_mode(z) / a_damped(z)``: its zeros are the poles of the model's mode under a
+    zero-order hold, its poles those of the same natural frequency at ``target_damping``, and
+    ``g`` sets its static gain to 1. In front of the actuator it cancels the model's mode, so a
+    step of the command does not ring it; a rate-independent hysteresis between the command and
+    the mode changes the amplitudes the mode sees, not their timing.
+
+    Parameters
+    ----------
+    dynamics : LinearDynamics
+        The model's linear block, second order.
+    sample_period : float
+        Sample period (s).
+    target_damping : float, optional
+        Damping of the mode that replaces the model's.
+    """
+
+    def __init__(self, dynamics: LinearDynamics, sample_period: float, target_damping: float = 0.7):
+        if dynamics.kind != "second-order":
+            raise ValueError(f"a mode notch needs a second-order block, got {dynamics.kind!r}")
+        numerator = dynamics.zoh_filter(sample_period)[1]
+        denominator = replace(dynamics, damping=target_damping).zoh_filter(sample_period)[1]
+        self.b = numerator * (denominator.sum() / numerator.sum())
+        self.a = denominator
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the filter's state (it starts at rest at its first input)."""
+        self._state = None
+
+    def __call__(self, command: float) -> float:
+        """The filtered command for this sample (transposed direct form II)."""
+        b, a = self.b, self.a
+        if self._state is None:  # at rest at the first command: the output equals it
+            s2 = (b[2] - a[2]) * command
+            self._state = [(b[1] - a[1]) * command + s2, s2]
+        out = b[0] * command + self._state[0]
+        self._state = [b[1] * command - a[1] * out + self._state[1], b[2] * command - a[2] * out]
+        return float(out)
 
 
 class Feedforward(Protocol):
@@ -128,13 +182,16 @@ class PidController:
         Added to the PID output before the clip.
     rate : float, optional
         Largest input change per sample (default: none).
+    command_filter : ModeNotch, optional
+        Filters the command before the clip (:class:`Pid`).
     """
 
     horizon = 0
 
     def __init__(self, gains: PidGains, sample_period: float, limits: tuple[float, float],
-                 feedforward: Feedforward | None = None, rate: float = np.inf):
-        self.pid = Pid(gains, sample_period, limits, rate)
+                 feedforward: Feedforward | None = None, rate: float = np.inf,
+                 command_filter: ModeNotch | None = None):
+        self.pid = Pid(gains, sample_period, limits, rate, command_filter)
         self.feedforward = feedforward
         self.reset()
 
@@ -214,8 +271,8 @@ class InverseFeedforward:
 
 def inverse_feedforward_pid(hysteresis: HysteresisModel, gains: PidGains, sample_period: float,
                             limits: tuple[float, float], steady_input: Callable | None = None,
-                            input_of: Callable | None = None, preview: int = 0, rate: float = np.inf
-                            ) -> PidController:
+                            input_of: Callable | None = None, preview: int = 0, rate: float = np.inf,
+                            command_filter: ModeNotch | None = None) -> PidController:
     """Inverse feed-forward + PID (the usual scheme for an actuator with hysteresis).
 
     Parameters
@@ -235,6 +292,8 @@ def inverse_feedforward_pid(hysteresis: HysteresisModel, gains: PidGains, sample
         reference preview (its ``horizon``).
     rate : float, optional
         Largest input change per sample (default: none).
+    command_filter : ModeNotch, optional
+        Filters the command before the clip (:class:`Pid`).
 
     Returns
     -------
@@ -242,7 +301,7 @@ def inverse_feedforward_pid(hysteresis: HysteresisModel, gains: PidGains, sample
         The PID with the inverse feed-forward.
     """
     controller = PidController(gains, sample_period, limits,
-                               InverseFeedforward(hysteresis, steady_input, input_of, preview), rate)
+                               InverseFeedforward(hysteresis, steady_input, input_of, preview), rate, command_filter)
     controller.horizon = preview
     return controller
 
