@@ -314,7 +314,7 @@ class ActuatorSpec:
                   "nmpc": NmpcSettings(horizon=horizon, q_output=(100 / span_y) ** 2,
                                        r_rate=1e-3 * (100 / span_u) ** 2, solver="rti-c", runtime="auto",
                                        multistart=True),
-                  "smoothing": Smoothing(eps=5e-5 * span_u), "solver": SolverSettings(),
+                  "smoothing": Smoothing(eps=1e-5 * span_u), "solver": SolverSettings(),
                   "pid": PidGains(), "inverse_ff_pid": FeedforwardPidGains(),
                   # the NMPC's horizon and weights, the rate weight on the virtual input (output units)
                   "lmpc": LinearMpcSettings(horizon=horizon, q_output=(100 / span_y) ** 2,

@@ -46,16 +46,16 @@ def test_identified_model_fits_the_records(piezo):
 
 @pytest.mark.slow  # 7-12 s: tunes the baselines and compares (CI runs it)
 def test_nmpc_beats_inverse_feedforward_pid_behind_its_notch(piezo, capsys):
-    """Measured 0.91 x on the sine and 0.56 x on the staircase (docs/your-actuator.md). It
+    """Measured 0.75 x on the sine and 0.56 x on the staircase (docs/your-actuator.md). It
     asserted "halves" until the baselines got their notch at the mode (0.28 / 0.42 x then):
-    the baseline got stronger, so the claim is now that the NMPC wins, and by a fifth on steps."""
+    the baseline got stronger, so the claim is now that the NMPC wins by a fifth."""
     out = piezo / "compare"
     assert main(["compare", str(piezo / "piezo.toml"), "--out", str(out), "--no-plots"]) == 0
     runs = {(r["scenario"], r["controller"]): r for r in json.loads((out / "results.json").read_text())["runs"]}
     for scenario in ("sine", "staircase"):
         nmpc, ff = runs[scenario, "nmpc"]["metrics"]["rmse"], runs[scenario, "inverse-ff-pid"]["metrics"]["rmse"]
         assert runs[scenario, "nmpc"]["solver"]["failures"] == 0
-        assert nmpc < (0.8 if scenario == "staircase" else 1.0) * ff, (scenario, nmpc, ff)
+        assert nmpc <= 0.8 * ff, (scenario, nmpc, ff)
         assert runs[scenario, "inverse-ff-pid"]["metrics"]["oscillation_cycles"] < 3
     gains = runs["sine", "pid"]["parameters"]["pid"]
     assert gains["ki"] > 0  # tuned, not the zero default
