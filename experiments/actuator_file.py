@@ -43,6 +43,7 @@ from hystmpc.experiments.baselines import (
     PidGains,
     inverse_feedforward_pid,
 )
+from hystmpc.experiments.baselines.pid import NOTCH_DAMPING
 from hystmpc.experiments.bench import MULTIPLE_SHOOTING, SINGLE_SHOOTING, Bench, ControllerSpec
 from hystmpc.experiments.config import apply_values
 from hystmpc.experiments.runner import Scenario
@@ -59,8 +60,6 @@ LOG = logging.getLogger("hystmpc")
 _WARNED: set[str] = set()
 """Warnings already given, once per file and process (the output range beyond the model's
 reach: the path; a linear block above Nyquist: the path with "#nyquist")."""
-NOTCH_DAMPING = 0.7
-"""The PID baselines' notch replaces a mode damped less than this by one damped this much."""
 GROUP_TABLES = ("nmpc", "smoothing", "solver", "pid", "inverse_ff_pid", "lmpc")
 """Optional tables that set the groups of the same name (as ``--set`` would)."""
 TABLES = {

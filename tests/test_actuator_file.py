@@ -292,12 +292,12 @@ def test_a_pid_filters_its_command_before_the_bounds_and_the_rate_limit():
 def test_the_pid_baselines_get_a_notch_only_for_a_lightly_damped_mode(piezo):
     import dataclasses
 
-    from hystmpc.experiments.actuator_file import NOTCH_DAMPING, ActuatorSpec
+    from hystmpc.experiments.actuator_file import ActuatorSpec
+    from hystmpc.experiments.baselines.pid import NOTCH_DAMPING
     spec = ActuatorSpec(piezo / "piezo.toml")
-    model = spec.bench().configure(tuned=False)["model"]
+    config = spec.bench().configure(tuned=False)
+    model = config["model"]
     assert model.dynamics.kind == "second-order" and model.dynamics.damping < NOTCH_DAMPING
-    config = {"model": model, "pid": spec.bench().configure(tuned=False)["pid"],
-              "inverse_ff_pid": spec.bench().configure(tuned=False)["inverse_ff_pid"]}
     for feedforward in (False, True):
         assert spec.build_pid(config, feedforward).pid.command_filter is not None
     for block in (dataclasses.replace(model.dynamics, damping=NOTCH_DAMPING),

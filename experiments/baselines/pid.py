@@ -20,6 +20,9 @@ import numpy as np
 from hystmpc.models.base import HysteresisModel
 from hystmpc.models.linear_dynamics import LinearDynamics
 
+NOTCH_DAMPING = 0.7
+"""A :class:`ModeNotch` replaces a mode damped less than this by one damped this much."""
+
 
 @dataclass(frozen=True)
 class PidGains:
@@ -139,7 +142,7 @@ class ModeNotch:
         The block is not second order.
     """
 
-    def __init__(self, dynamics: LinearDynamics, sample_period: float, target_damping: float = 0.7):
+    def __init__(self, dynamics: LinearDynamics, sample_period: float, target_damping: float = NOTCH_DAMPING):
         if dynamics.kind != "second-order":
             raise ValueError(f"a mode notch needs a second-order block, got {dynamics.kind!r}")
         numerator = dynamics.zoh_filter(sample_period)[1]
