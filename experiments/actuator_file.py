@@ -60,6 +60,10 @@ LOG = logging.getLogger("hystmpc")
 _WARNED: set[str] = set()
 """Warnings already given, once per file and process (the output range beyond the model's
 reach: the path; a linear block above Nyquist: the path with "#nyquist")."""
+SECOND_START_SHARE = 0.0025
+"""The NMPC solves from the inverse model's inputs too where its first plan misses the
+reference by this share of the output span (RMS over the horizon): where the shifted plan
+tracks, the second start hardly ever wins (docs/your-actuator.md)."""
 GROUP_TABLES = ("nmpc", "smoothing", "solver", "pid", "inverse_ff_pid", "lmpc")
 """Optional tables that set the groups of the same name (as ``--set`` would)."""
 TABLES = {
@@ -308,17 +312,27 @@ class ActuatorSpec:
         horizon = int(np.clip(self.dynamics.delay_samples + round(self._settling() / self.sample_period) + 2, 10, 40))
         config = {"plant": self.plant, "model": model,
                   # runtime auto: the generated whole controller in the loop, as it would be flashed
-                  # multistart: a second RTI plan from the inverse model's inputs each sample, the
+                  # multistart: a second RTI plan from the inverse model's inputs where the first
+                  # misses the reference by SECOND_START_SHARE of the span (RMS over the horizon), the
                   # cheaper plan kept; it pays where the identified model is off (docs/your-actuator.md)
-                  "nmpc": NmpcSettings(horizon=horizon, q_output=(100 / span_y) ** 2,
+                  "nmpc": NmpcSettings(horizon=min(horizon, self._longest_horizon()), q_output=(100 / span_y) ** 2,
                                        r_rate=1e-3 * (100 / span_u) ** 2, solver="rti-c", runtime="auto",
-                                       multistart=True),
+                                       multistart=True, second_start_error=SECOND_START_SHARE * span_y),
                   "smoothing": Smoothing(eps=1e-5 * span_u), "solver": SolverSettings(),
                   "pid": PidGains(), "inverse_ff_pid": FeedforwardPidGains(),
-                  # the NMPC's horizon and weights, the rate weight on the virtual input (output units)
+                  # the NMPC's weights and uncapped horizon (a Python baseline, not real time above
+                  # 1 kHz either way), the rate weight on the virtual input (output units)
                   "lmpc": LinearMpcSettings(horizon=horizon, q_output=(100 / span_y) ** 2,
                                             r_rate=1e-3 * (100 / span_y) ** 2)}
         return apply_values(config, self.table_values, self._unused_keys())
+
+    def _longest_horizon(self) -> int:
+        """The NMPC's longest default horizon: 40 samples up to 1 kHz, fewer above.
+
+        In proportion to the rate (at least 10): the RTI step's work grows faster than the
+        horizon, and the period shrinks.
+        """
+        return int(np.clip(round(40 * self.sample_period / 1e-3), 10, 40))
 
     def _settling(self) -> float:
         d = self.dynamics

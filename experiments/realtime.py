@@ -197,7 +197,10 @@ def speed(bench: Bench, config: dict, variants, duration: float | None = None, o
         start = time.perf_counter()
         run = bench.run(scenario, "nmpc", duration=duration, prepared=prepared)
         solve_ms = 1e3 * np.asarray(getattr(prepared.controller, "solve_times", [np.nan]))
-        rows.append({"variant": variant, "multistart": variant_config["nmpc"].multistart,
+        nmpc = variant_config["nmpc"]
+        rows.append({"variant": variant, "multistart": nmpc.multistart,
+                     "second_start_error": nmpc.second_start_error if nmpc.multistart else None,
+                     "second_starts": getattr(prepared.controller, "second_starts", None) if nmpc.multistart else None,
                      "rmse": run.metrics["rmse"], **run.timing,
                      "solve_ms_median": float(np.median(solve_ms)), "solve_ms_p95": float(np.percentile(solve_ms, 95)),
                      "solve_ms_max": float(np.max(solve_ms)), "failures": run.solver["failures"],
@@ -230,7 +233,11 @@ def speed_table(result: dict) -> str:
              "| median % of period | failures |",
              "|---|---|---|---|---|---|"]
     for r in result["variants"]:
-        variant = f"{r['variant']}, two starts" if r.get("multistart") else r["variant"]
+        variant = r["variant"]
+        if r.get("multistart"):
+            variant += (", two starts" if not r.get("second_start_error") else
+                        f", a second start on {r['second_starts']} samples" if r.get("second_starts") is not None else
+                        ", a second start where the first plan misses")
         lines.append(f"| {variant} | {r['rmse']:.4g} | {r['step_ms_median']:.3f} / {r['step_ms_p95']:.3f} / "
                      f"{r['step_ms_max']:.3f} | {r['solve_ms_median']:.3f} / {r['solve_ms_p95']:.3f} / "
                      f"{r['solve_ms_max']:.3f} | {100 * r['step_ms_median'] / period:.1f} % | {r['failures']} |")

@@ -165,6 +165,7 @@ class NmpcController:
         self.fallbacks = 0
         self.reinitialisations = 0
         self.inverse_starts_kept = 0
+        self.second_starts = 0
         self.estimator_resets = 0
         self.iterations: list[int] = []
         self.solve_times: list[float] = []
@@ -250,7 +251,8 @@ class NmpcController:
             u_ff = u_inv() if self.settings.r_input > 0 else np.zeros(N)  # zero weight: value unused
             condition = self.observer.condition(est)
             result = self.problem.solve(condition, self._u_last, refs, u_guess, x_guess, u_ff=u_ff)
-            if self.settings.multistart and not from_inverse:
+            if self.settings.multistart and not from_inverse and self._plan_is_off(result):
+                self.second_starts += 1
                 other = self.problem.solve(condition, self._u_last, refs, u_inv(), None, u_ff=u_ff)
                 if other.success and (not result.success or other.cost < result.cost):
                     self.inverse_starts_kept += 1
@@ -287,6 +289,12 @@ class NmpcController:
         self._started = True
         return u
 
+    def _plan_is_off(self, result: Solution) -> bool:
+        """Whether ``result``'s plan tracks worse than ``nmpc.second_start_error`` (RMS, output units)."""
+        s = self.settings
+        rms = np.sqrt(np.fmax(result.cost, 0.0) / (s.q_output * s.horizon))
+        return not (result.success and rms <= s.second_start_error)
+
     def _initial_guess(self, u_inv, jump: bool, est: Estimate):
         mode = self.settings.warm_start
         N = self.horizon
@@ -316,7 +324,8 @@ class NmpcController:
         dict
             ``name`` (the solver), ``failures``, ``fallbacks``, ``iterations_median``,
             ``iterations_max``, ``reinitialisations``, ``estimator_resets``, ``statuses``
-            (status -> samples), with ``multistart`` also ``inverse_starts_kept``, with a
+            (status -> samples), with ``multistart`` also ``second_starts`` (samples solved from
+            the inverse too) and ``inverse_starts_kept``, with a
             linear-MPC planner also ``planner_failures``.
         """
         its = np.asarray(self.iterations) if self.iterations else np.zeros(1)
@@ -324,6 +333,7 @@ class NmpcController:
                 "iterations_median": float(np.median(its)), "iterations_max": int(its.max()),
                 "reinitialisations": self.reinitialisations, "estimator_resets": self.estimator_resets,
                 "statuses": dict(self.statuses),
-                **({"inverse_starts_kept": self.inverse_starts_kept} if self.settings.multistart else {}),
+                **({"second_starts": self.second_starts, "inverse_starts_kept": self.inverse_starts_kept}
+                   if self.settings.multistart else {}),
                 **({"planner_failures": self.planner.failures}
                    if self.settings.inverse_plan == "linear-mpc" and self.planner is not None else {})}

@@ -383,9 +383,9 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     shifted = ca.vertcat(plan[1:], plan[-1])
     # the inverse is a large share of a step: computed only on the samples that use it
     restart = ca.logic_or(ca.logic_not(has_plan), jump)  # the inverse warm start's samples
-    needs_inverse = ca.MX(1) if s.r_input > 0 or s.multistart else restart if s.warm_start == "inverse" else ca.MX(0)
+    needs_inverse = ca.MX(1) if s.r_input > 0 else restart if s.warm_start == "inverse" else ca.MX(0)
     u_inv = None
-    if inverse_plan is not None and (s.r_input > 0 or s.warm_start == "inverse" or s.multistart):
+    if inverse_plan is not None and (s.r_input > 0 or s.warm_start == "inverse"):
         u_inv = inverse_plan(needs_inverse)
     if s.warm_start == "cold":
         u_guess = ca.DM.zeros(N)
@@ -407,12 +407,19 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
         return w, ca.logic_and(ca.logic_and(ca.logic_not(lost), ca.logic_not(broken)), worst <= QP_TOLERANCE)
 
     w, success = rti_steps(u_guess)
-    if s.multistart:  # also from the inverse (the same start on a restart, so the first plan is kept)
-        if u_inv is None or problem.rti_cost is None:
+    if s.multistart:  # also from the inverse where the first plan tracks badly (and did not start there)
+        if inverse_plan is None or problem.rti_cost is None:
             raise NotGeneratable("nmpc.multistart needs an inverse model and an RTI step over the inputs (its cost)")
-        w_inv, success_inv = rti_steps(u_inv)
-        take = ca.logic_and(success_inv, ca.logic_or(ca.logic_not(success),
-                                                     problem.rti_cost(w_inv, p) < problem.rti_cost(w, p)))
+        cost = problem.rti_cost(w, p)
+        tracks = ca.sqrt(ca.fmax(cost, 0.0) / (s.q_output * N)) <= s.second_start_error
+        from_inverse = restart if s.warm_start == "inverse" else ca.MX(0)
+        second = ca.logic_and(ca.logic_not(ca.logic_and(success, tracks)), ca.logic_not(from_inverse))
+        u_second = u_inv if s.r_input > 0 else inverse_plan(second)
+        w_inv, worst_inv, broken_inv, cost_inv = _second_start(problem, settings, extra_step, N, p.numel(),
+                                                               u_min, u_max, rate)(second, u_second, p, u_last)
+        success_inv = ca.logic_and(ca.logic_and(second, ca.logic_not(lost)),
+                                   ca.logic_and(ca.logic_not(broken_inv), worst_inv <= QP_TOLERANCE))
+        take = ca.logic_and(success_inv, ca.logic_or(ca.logic_not(success), cost_inv < cost))
         w, success = ca.if_else(take, w_inv, w), ca.logic_or(take, success)
 
     planned = ca.if_else(success, w[0], plan[min(1, N - 1)])
@@ -555,6 +562,23 @@ def rti_steps_expr(rti: ca.Function, w, p, iterations: int, extra_step_tolerance
         extra_step = extra_step or _extra_rti_step(rti, w.numel(), p.numel())
         w = take(w, extra_step(needed, w, p), needed)
     return w, worst, broken
+
+
+def _second_start(problem, settings, extra_step: ca.Function, N: int, n_p: int, u_min: float, u_max: float,
+                  rate: float) -> ca.Function:
+    """``start(needed, u_start, p, u_last) -> (w, worst, broken, cost)``: a second start.
+
+    The RTI steps from ``u_start`` made feasible, and the cost there, where ``needed``; else
+    a broken result. Through a switch, so that generated code solves from the second start only on the samples
+    that need it.
+    """
+    u_start, p, u_last = ca.MX.sym("u_start", N), ca.MX.sym("p", n_p), ca.MX.sym("u_last")
+    w = feasible_guess_expr(u_start, u_last, u_min, u_max, rate)
+    w, worst, broken = rti_steps_expr(problem.rti, w, p, settings.iterations, settings.extra_step_tolerance,
+                                      extra_step)
+    solve = ca.Function("second_start", [u_start, p, u_last], [w, worst, broken, problem.rti_cost(w, p)])
+    skip = ca.Function("no_second_start", [u_start, p, u_last], [u_start, ca.MX(0), ca.MX(1), ca.MX(np.inf)])
+    return ca.Function.if_else("second_start_if_needed", solve, skip)
 
 
 def _extra_rti_step(rti: ca.Function, N: int, n_p: int) -> ca.Function:

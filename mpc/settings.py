@@ -72,6 +72,12 @@ class NmpcSettings:
     takes twice the solves; the iteration counts then add up both. Needs an inverse model
     and solver ``gn``, ``rti`` or ``rti-c`` (the RTI step condensed onto the inputs), which
     report the cost compared; the generated controller runs the RTI steps from both starts."""
+    second_start_error: float = 0.0
+    """With ``multistart``, solve from the inverse model's inputs only on samples whose first
+    plan tracks worse than this: its cost as an RMS tracking error over the horizon,
+    ``sqrt(cost / (q_output · horizon))`` (output units; 0: every sample). Where the
+    shifted plan tracks, the second solve rarely wins; skipping it halves those samples'
+    work (docs/your-actuator.md)."""
     runtime: str = "python"
     """Where the controller runs in closed loop: ``python``; ``c``: the whole generated
     controller that ``hystmpc codegen`` writes (estimator, warm start, RTI steps,
@@ -93,6 +99,7 @@ class NmpcSettings:
             raise ValueError(f"inverse_plan {self.inverse_plan!r} is unknown; allowed: {', '.join(INVERSE_PLANS)}")
         _check_finite(self, ("r_rate", "r_input"))
         _check_finite(self, ("q_output",), strict=True)
+        _check_finite(self, ("second_start_error",))
 
     def check_combination(self, solvers: SolverSettings | None = None) -> None:
         """``ValueError`` for settings that cannot go together, also with the ``solvers`` given.

@@ -303,3 +303,17 @@ def test_the_pid_baselines_get_a_notch_only_for_a_lightly_damped_mode(piezo):
     for block in (dataclasses.replace(model.dynamics, damping=NOTCH_DAMPING),
                   dataclasses.replace(model.dynamics, kind="first-order")):
         assert spec.command_notch(dataclasses.replace(model, dynamics=block)) is None
+
+
+def test_the_nmpcs_second_start_and_horizon_follow_the_span_and_the_rate(piezo):
+    """The second start is taken where the first plan misses by 0.25 % of the output span (RMS
+    over the horizon); the horizon's cap is 40 samples up to 1 kHz and shrinks with the rate."""
+    from hystmpc.experiments.actuator_file import SECOND_START_SHARE, ActuatorSpec
+    spec = ActuatorSpec(piezo / "piezo.toml")
+    nmpc = spec._configured()["nmpc"]
+    span = spec.output_range[1] - spec.output_range[0]
+    assert nmpc.multistart and nmpc.second_start_error == pytest.approx(SECOND_START_SHARE * span)
+    assert spec.sample_period == 1e-3 and spec._longest_horizon() == 40 and nmpc.horizon <= 40
+    for period, cap in ((0.5e-3, 20), (0.25e-3, 10), (0.1e-3, 10), (2e-3, 40)):
+        spec.sample_period = period
+        assert spec._longest_horizon() == cap, period

@@ -51,6 +51,8 @@ def _python_and_generated(bench_name: str, scenario: str, duration: float, assig
     ("dea", "single-sine", 1.0, 0.5, ("memory.window=50", "nmpc.multistart=true", "nmpc.r_rate=0.01",
                                       "nmpc.inverse_plan=static")),
     ("pam", "square-20", 4.0, 1.0, ("nmpc.multistart=true",)),  # the condensed multiple-shooting step's cost
+    # the second start only where the first plan tracks worse than 0.5° RMS (after the jumps)
+    ("pam", "square-20", 4.0, 1.0, ("nmpc.multistart=true", "nmpc.second_start_error=0.5")),
 ])
 def test_the_functions_repeat_the_python_controller(bench_name, scenario, duration, moves, assignments):
     python, generated, functions = _python_and_generated(bench_name, scenario, duration, assignments)
@@ -60,8 +62,13 @@ def test_the_functions_repeat_the_python_controller(bench_name, scenario, durati
     assert np.ptp(generated.input) > moves  # the inputs moved: estimator and memory were exercised
     if bench_name == "reluctance":  # its third RTI step, taken only when the second did not settle
         assert python.solver["iterations_median"] == 2 and python.solver["iterations_max"] == 3
-    if "nmpc.multistart=true" in assignments:  # both starts' plans were sent
-        assert 0 < python.solver["inverse_starts_kept"] < len(python.input) - 1
+    if "nmpc.multistart=true" in assignments:
+        solves = len(python.input) - 1  # the first sample starts from the inverse
+        if any(a.startswith("nmpc.second_start_error") for a in assignments):  # some samples solved twice
+            assert 0 < python.solver["second_starts"] < solves / 2
+        else:  # every sample solved twice, both starts' plans sent
+            assert python.solver["second_starts"] == solves
+            assert 0 < python.solver["inverse_starts_kept"] < solves
 
 
 def test_failures_and_lost_estimates_take_the_python_controllers_fallbacks():

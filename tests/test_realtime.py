@@ -457,7 +457,8 @@ def test_an_nmpc_run_late_at_p95_says_what_shortens_its_step(tmp_path, monkeypat
     assert "nmpc.solver=rti-c (now ipopt)" in run_module._shorter_step_hint(
         NmpcSettings(solver="ipopt"), "pam", [_late(1.3)])
     assert run_module._shorter_step_hint(NmpcSettings(multistart=True), "x.toml", [_late(1.3), _late(2.0)]) == (
-        "nmpc: its p95 step is up to 200% of the period; a shorter nmpc.horizon (now 20), or nmpc.multistart=false "
+        "nmpc: its p95 step is up to 200% of the period; a shorter nmpc.horizon (now 20), or a larger "
+        "nmpc.second_start_error (now 0: the second start on fewer samples), or nmpc.multistart=false "
         "(one start per sample) shortens it ('hystmpc speed x.toml' with the same --set options times it alone)")
 
 

@@ -250,6 +250,8 @@ def _shorter_step_hint(nmpc, bench_name: str, late: list) -> str:
     if nmpc.solver not in ("rti", "rti-c"):
         levers.insert(0, f"nmpc.solver=rti-c (now {nmpc.solver})")
     if nmpc.multistart:
+        levers.append(f"a larger nmpc.second_start_error (now {nmpc.second_start_error:.4g}: the second start on "
+                      "fewer samples)")
         levers.append("nmpc.multistart=false (one start per sample)")
     worst = max(r.timing["p95_share_of_period"] for r in late)
     return (f"nmpc: its p95 step is up to {worst:.0%} of the period; {', or '.join(levers)} shortens it "
