@@ -329,10 +329,11 @@ class ActuatorSpec:
     def _longest_horizon(self) -> int:
         """The NMPC's longest default horizon: 40 samples up to 1 kHz, fewer above.
 
-        In proportion to the rate (at least 10): the RTI step's work grows faster than the
-        horizon, and the period shrinks.
+        In proportion to the rate (at least 10, and 2 samples beyond the dead time): the RTI step's
+        work grows faster than the horizon, and the period shrinks.
         """
-        return int(np.clip(round(40 * self.sample_period / 1e-3), 10, 40))
+        cap = int(np.clip(round(40 * self.sample_period / 1e-3), 10, 40))
+        return max(cap, min(self.dynamics.delay_samples + 2, 40))
 
     def _settling(self) -> float:
         d = self.dynamics

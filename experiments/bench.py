@@ -236,7 +236,8 @@ class Bench:
         for key, horizon in horizons:
             if horizon != nmpc.horizon:
                 raise ValueError(f"{why} over the NMPC's horizon: {key}={horizon} differs from "
-                                 f"nmpc.horizon={nmpc.horizon}; drop {key}, or set nmpc.inverse_plan=static")
+                                 f"nmpc.horizon={nmpc.horizon}; set {key}={nmpc.horizon} (or drop it where it was "
+                                 f"set), or set nmpc.inverse_plan=static")
         try:
             return self.build_controller(spec.planner, config)
         except ValueError as exc:

@@ -18,7 +18,7 @@ from hystmpc.mpc.estimator import DisturbanceEKF
 from hystmpc.mpc.multiple_shooting import MultipleShootingProblem
 from hystmpc.mpc.observer import Estimate, MemoryObserver, StateObserver, memory_inverse
 from hystmpc.mpc.problem import Solution, TrackingProblem
-from hystmpc.mpc.settings import InputBounds, NmpcSettings, SolverSettings
+from hystmpc.mpc.settings import InputBounds, NmpcSettings, SolverSettings, second_start_cost
 from hystmpc.mpc.single_shooting import SingleShootingProblem
 
 Inverse = Callable[[Estimate, np.ndarray], np.ndarray]
@@ -290,10 +290,12 @@ class NmpcController:
         return u
 
     def _plan_is_off(self, result: Solution) -> bool:
-        """Whether ``result``'s plan tracks worse than ``nmpc.second_start_error`` (RMS, output units)."""
-        s = self.settings
-        rms = np.sqrt(np.fmax(result.cost, 0.0) / (s.q_output * s.horizon))
-        return not (result.success and rms <= s.second_start_error)
+        """Whether ``result`` failed or costs more than ``nmpc.second_start_error`` allows.
+
+        Always with 0; a NaN cost is off too.
+        """
+        limit = second_start_cost(self.settings)
+        return limit is None or not (result.success and result.cost <= limit)
 
     def _initial_guess(self, u_inv, jump: bool, est: Estimate):
         mode = self.settings.warm_start

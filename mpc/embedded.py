@@ -32,6 +32,7 @@ from hystmpc.models.fractional import window_functions
 from hystmpc.mpc.codegen.controller import ControllerCode
 from hystmpc.mpc.observer import Estimate, MemoryObserver, StateObserver
 from hystmpc.mpc.rti import QP_TOLERANCE
+from hystmpc.mpc.settings import second_start_cost
 
 
 class NotGeneratable(ValueError):
@@ -411,9 +412,11 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
         if inverse_plan is None or problem.rti_cost is None:
             raise NotGeneratable("nmpc.multistart needs an inverse model and an RTI step over the inputs (its cost)")
         cost = problem.rti_cost(w, p)
-        tracks = ca.sqrt(ca.fmax(cost, 0.0) / (s.q_output * N)) <= s.second_start_error
+        limit = second_start_cost(s)
+        tracks = ca.MX(0) if limit is None else cost <= limit  # a NaN cost does not track
         from_inverse = restart if s.warm_start == "inverse" else ca.MX(0)
-        second = ca.logic_and(ca.logic_not(ca.logic_and(success, tracks)), ca.logic_not(from_inverse))
+        second = ca.logic_and(ca.logic_not(ca.logic_and(success, tracks)),
+                              ca.logic_not(ca.logic_or(from_inverse, lost)))  # Python solves on neither
         u_second = u_inv if s.r_input > 0 else inverse_plan(second)
         w_inv, worst_inv, broken_inv, cost_inv = _second_start(problem, settings, extra_step, N, p.numel(),
                                                                u_min, u_max, rate)(second, u_second, p, u_last)
@@ -427,8 +430,11 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     falls_back = ca.logic_not(ca.logic_and(ca.logic_or(success, has_plan), ca.fabs(planned) < ca.inf))
     fallback = u_last
     if inverse_plan is not None:  # the inverse's first input, computed again only if not at hand
-        again = inverse_plan(falls_back if u_inv is None else ca.logic_and(falls_back, ca.logic_not(needs_inverse)))
-        fallback = again[0] if u_inv is None else ca.if_else(needs_inverse, u_inv[0], again[0])
+        at_hand, held = (needs_inverse, u_inv) if u_inv is not None else (ca.MX(0), None)
+        if u_inv is None and s.multistart:
+            at_hand, held = second, u_second
+        again = inverse_plan(ca.logic_and(falls_back, ca.logic_not(at_hand)))
+        fallback = again[0] if held is None else ca.if_else(at_hand, held[0], again[0])
     u = ca.if_else(falls_back, fallback, planned)
     if np.isfinite(rate):
         u = _clip(u, u_last - rate, u_last + rate)

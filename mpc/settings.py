@@ -66,18 +66,19 @@ class NmpcSettings:
     hysteresis model), which also sees the dynamics and the disturbance estimate (docs/dea.md).
     Not in the generated controller yet."""
     multistart: bool = False
-    """Each sample, also solve from the inverse model's inputs (unless that was the start)
-    and keep the plan with the lower cost. Across a hysteresis loop the tracking problem has
-    several local minima, and the shifted plan can sit in the worse one (docs/dea.md). It
-    takes twice the solves; the iteration counts then add up both. Needs an inverse model
-    and solver ``gn``, ``rti`` or ``rti-c`` (the RTI step condensed onto the inputs), which
-    report the cost compared; the generated controller runs the RTI steps from both starts."""
+    """Also solve from the inverse model's inputs (unless that was the start) and keep the
+    plan with the lower cost: on every sample, or only where the first plan misses
+    (``second_start_error``). Across a hysteresis loop the tracking problem has several
+    local minima, and the shifted plan can sit in the worse one (docs/dea.md). The iteration
+    counts then add up both solves. Needs an inverse model and solver ``gn``, ``rti`` or
+    ``rti-c`` (the RTI step condensed onto the inputs), which report the cost compared; the
+    generated controller runs the second start's RTI steps only on the samples that take it."""
     second_start_error: float = 0.0
     """With ``multistart``, solve from the inverse model's inputs only on samples whose first
-    plan tracks worse than this: its cost as an RMS tracking error over the horizon,
-    ``sqrt(cost / (q_output · horizon))`` (output units; 0: every sample). Where the
-    shifted plan tracks, the second solve rarely wins; skipping it halves those samples'
-    work (docs/your-actuator.md)."""
+    plan failed or costs more than this RMS error over the horizon, ``q_output · horizon ·
+    second_start_error²`` (output units; the cost includes the rate and input weights' terms;
+    0: every sample). Where the shifted plan tracks, the second solve rarely wins; skipping
+    it halves those samples' work (docs/your-actuator.md)."""
     runtime: str = "python"
     """Where the controller runs in closed loop: ``python``; ``c``: the whole generated
     controller that ``hystmpc codegen`` writes (estimator, warm start, RTI steps,
@@ -127,6 +128,24 @@ class NmpcSettings:
             raise ValueError("nmpc.multistart compares the costs of two RTI plans over the inputs; "
                              "solver.rti.condensed=false (multiple shooting only) plans the states too: drop it, or "
                              "set nmpc.multistart=false")
+
+
+def second_start_cost(settings: NmpcSettings) -> float | None:
+    """The first plan's cost above which ``multistart`` solves again (None: every sample).
+
+    Parameters
+    ----------
+    settings : NmpcSettings
+        The NMPC's settings (``q_output``, ``horizon``, ``second_start_error``).
+
+    Returns
+    -------
+    float or None
+        ``q_output · horizon · second_start_error²``; None when ``second_start_error`` is 0.
+    """
+    if settings.second_start_error == 0:
+        return None
+    return settings.q_output * settings.horizon * settings.second_start_error ** 2
 
 
 @dataclass(frozen=True)

@@ -308,6 +308,8 @@ def test_the_pid_baselines_get_a_notch_only_for_a_lightly_damped_mode(piezo):
 def test_the_nmpcs_second_start_and_horizon_follow_the_span_and_the_rate(piezo):
     """The second start is taken where the first plan misses by 0.25 % of the output span (RMS
     over the horizon); the horizon's cap is 40 samples up to 1 kHz and shrinks with the rate."""
+    import dataclasses
+
     from hystmpc.experiments.actuator_file import SECOND_START_SHARE, ActuatorSpec
     spec = ActuatorSpec(piezo / "piezo.toml")
     nmpc = spec._configured()["nmpc"]
@@ -317,3 +319,5 @@ def test_the_nmpcs_second_start_and_horizon_follow_the_span_and_the_rate(piezo):
     for period, cap in ((0.5e-3, 20), (0.25e-3, 10), (0.1e-3, 10), (2e-3, 40)):
         spec.sample_period = period
         assert spec._longest_horizon() == cap, period
+    spec.sample_period, spec.dynamics = 0.2e-3, dataclasses.replace(spec.dynamics, delay_samples=12)
+    assert spec._longest_horizon() == 14  # 2 samples past the dead time

@@ -53,6 +53,10 @@ def _python_and_generated(bench_name: str, scenario: str, duration: float, assig
     ("pam", "square-20", 4.0, 1.0, ("nmpc.multistart=true",)),  # the condensed multiple-shooting step's cost
     # the second start only where the first plan tracks worse than 0.5° RMS (after the jumps)
     ("pam", "square-20", 4.0, 1.0, ("nmpc.multistart=true", "nmpc.second_start_error=0.5")),
+    # ... with the shifted start at start-up (the second start's inverse also serves the fallback),
+    # and with r_input > 0 (the inverse every sample, reused by the second start)
+    ("pam", "square-20", 4.0, 1.0, ("nmpc.multistart=true", "nmpc.second_start_error=0.5", "nmpc.warm_start=shift")),
+    ("pam", "square-20", 4.0, 1.0, ("nmpc.multistart=true", "nmpc.second_start_error=0.5", "nmpc.r_input=0.01")),
 ])
 def test_the_functions_repeat_the_python_controller(bench_name, scenario, duration, moves, assignments):
     python, generated, functions = _python_and_generated(bench_name, scenario, duration, assignments)

@@ -143,7 +143,7 @@ def test_nmpc_with_a_linear_mpc_plan_needs_the_planner():
     measurement = bench.build_plant(config).reset(0)
     with pytest.raises(ValueError, match="nmpc.inverse_plan=linear-mpc .* set nmpc.inverse_plan=static"):
         bare.step(measurement, np.ones(bare.horizon + 1))
-    with pytest.raises(ValueError, match="lmpc.horizon=9 differs from nmpc.horizon=15; drop lmpc.horizon"):
+    with pytest.raises(ValueError, match="lmpc.horizon=9 differs from nmpc.horizon=15; set lmpc.horizon=15"):
         bench.build_controller("nmpc", bench.configure(["lmpc.horizon=9"]))
     static = bench.configure(["nmpc.inverse_plan=static"])
     assert bench.build_controller("nmpc", static).planner is None
