@@ -168,7 +168,8 @@ class BoucWen(SteppedModel):
             if self.exponent == 1.0:
                 moved = self._hard_move(z, du, s)
             else:
-                moved = self._pieces(z, du, s, lambda x: (ca.sign(x), 0.0), lambda x: (ca.fabs(x), ca.sign(x)))
+                moved = self._pieces(z, du, s, lambda x: (ca.sign(x), 0.0),
+                                     lambda x: (ca.fabs(x), ca.sign(x), ca.fabs(x) ** (self.exponent - 1.0)))
             nxt = ca.vertcat(u, ca.if_else(du == 0, z, moved))
             return nxt, self.output(nxt)
         if not np.isfinite(u):
@@ -194,15 +195,14 @@ class BoucWen(SteppedModel):
         """:data:`SUBSTEPS` exponential Euler pieces of a move (``n != 1``, CasADi).
 
         ``side(ζ)`` is ``(sgn ζ, its derivative)`` and ``magnitude(ζ)`` is ``(|ζ|, its
-        derivative)``, or smoothed ones.
+        derivative, |ζ|^(n−1))``, or smoothed ones.
         """
         n, h = self.exponent, du / SUBSTEPS
         bound = (self.beta + self.gamma) ** (-1.0 / n)
         for _ in range(SUBSTEPS):
             sign, dsign = side(z)
-            m, dm = magnitude(z)
+            m, dm, w = magnitude(z)
             c = self.beta * s * sign + self.gamma
-            w = m ** (n - 1.0)
             rate = 1.0 - c * w * m
             slope = -(self.beta * s * dsign * w * m + n * c * w * dm)
             z = ca.fmin(ca.fmax(z + h * _exp_ratio(h * slope) * rate, -bound), bound)
@@ -244,9 +244,10 @@ class BoucWen(SteppedModel):
             t = ca.tanh(z / eps)
             return t, (1 - t * t) / eps
 
-        def magnitude(z):
-            m = ca.sqrt(z * z + eps * eps)
-            return m, z / m
+        def magnitude(z):  # the power as exp(log): its derivative reuses the exp, where pow's calls pow again
+            square = z * z + eps * eps
+            m = ca.sqrt(square)
+            return m, z / m, ca.exp(0.5 * (self.exponent - 1.0) * ca.log(square))
 
         def expressions(state, u):
             du, z = u - state[0], state[1]

@@ -166,6 +166,7 @@ class NmpcController:
         self.reinitialisations = 0
         self.inverse_starts_kept = 0
         self.second_starts = 0
+        self._paused = 0  # samples left without a second start after one that lost
         self.estimator_resets = 0
         self.iterations: list[int] = []
         self.solve_times: list[float] = []
@@ -251,7 +252,8 @@ class NmpcController:
             u_ff = u_inv() if self.settings.r_input > 0 else np.zeros(N)  # zero weight: value unused
             condition = self.observer.condition(est)
             result = self.problem.solve(condition, self._u_last, refs, u_guess, x_guess, u_ff=u_ff)
-            if self.settings.multistart and not from_inverse and self._plan_is_off(result):
+            paused, self._paused = self._paused > 0, max(self._paused - 1, 0)
+            if self.settings.multistart and not from_inverse and self._plan_is_off(result, paused):
                 self.second_starts += 1
                 other = self.problem.solve(condition, self._u_last, refs, u_inv(), None, u_ff=u_ff)
                 if other.success and (not result.success or other.cost < result.cost):
@@ -260,6 +262,7 @@ class NmpcController:
                     other.iterations += result.iterations
                     result = other
                 else:
+                    self._paused = self.settings.second_start_pause
                     result.solve_time += other.solve_time
                     result.iterations += other.iterations
             if result.success and not np.all(np.isfinite(result.u_plan)):
@@ -289,13 +292,16 @@ class NmpcController:
         self._started = True
         return u
 
-    def _plan_is_off(self, result: Solution) -> bool:
-        """Whether ``result`` failed or costs more than ``nmpc.second_start_error`` allows.
+    def _plan_is_off(self, result: Solution, paused: bool) -> bool:
+        """Whether to solve again from the inverse: ``result`` failed, or it is off.
 
-        Always with 0; a NaN cost is off too.
+        Off: always with ``nmpc.second_start_error`` 0; else, unless ``paused``, where it both
+        costs more and ends further off than the error allows (a NaN counts as over).
         """
         limit = second_start_cost(self.settings)
-        return limit is None or not (result.success and result.cost <= limit)
+        if limit is None or not result.success:
+            return True
+        return not (paused or result.cost <= limit or abs(result.end_error) <= self.settings.second_start_error)
 
     def _initial_guess(self, u_inv, jump: bool, est: Estimate):
         mode = self.settings.warm_start

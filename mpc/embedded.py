@@ -48,7 +48,8 @@ class MemoryLayout:
     ``x``, ``d``, ``P`` of its EKF if it has one), then ``u_last`` (input sent last),
     ``started`` (1 after the first step), ``plan`` (the last successful input plan),
     ``has_plan``, ``ref_end`` (the last preview's final reference, for the jump test),
-    ``has_ref_end``, ``failures`` and ``estimator_resets`` (counters since the start).
+    ``has_ref_end``, ``failures`` and ``estimator_resets`` (counters since the start), and
+    ``paused`` (samples left without a second start, ``nmpc.second_start_pause``).
     """
 
     estimator: tuple[tuple[str, int], ...]
@@ -60,7 +61,7 @@ class MemoryLayout:
     def parts(self) -> dict[str, int]:
         """Name -> length, in memory order."""
         return {**dict(self.estimator), "u_last": 1, "started": 1, "plan": self.horizon, "has_plan": 1,
-                "ref_end": 1, "has_ref_end": 1, "failures": 1, "estimator_resets": 1}
+                "ref_end": 1, "has_ref_end": 1, "failures": 1, "estimator_resets": 1, "paused": 1}
 
     @property
     def slices(self) -> dict[str, slice]:
@@ -408,12 +409,15 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
         return w, ca.logic_and(ca.logic_and(ca.logic_not(lost), ca.logic_not(broken)), worst <= QP_TOLERANCE)
 
     w, success = rti_steps(u_guess)
+    pause_next = part("paused")
     if s.multistart:  # also from the inverse where the first plan tracks badly (and did not start there)
-        if inverse_plan is None or problem.rti_cost is None:
+        if inverse_plan is None or problem.rti_outcome is None:
             raise NotGeneratable("nmpc.multistart needs an inverse model and an RTI step over the inputs (its cost)")
-        cost = problem.rti_cost(w, p)
+        cost, end_error = problem.rti_outcome(w, p)
         limit = second_start_cost(s)
-        tracks = ca.MX(0) if limit is None else cost <= limit  # a NaN cost does not track
+        paused = part("paused") > 0.5
+        tracks = ca.MX(0) if limit is None else ca.logic_or(  # a NaN cost or end error does not track
+            ca.logic_or(cost <= limit, ca.fabs(end_error) <= s.second_start_error), paused)
         from_inverse = restart if s.warm_start == "inverse" else ca.MX(0)
         second = ca.logic_and(ca.logic_not(ca.logic_and(success, tracks)),
                               ca.logic_not(ca.logic_or(from_inverse, lost)))  # Python solves on neither
@@ -424,6 +428,8 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
                                    ca.logic_and(ca.logic_not(broken_inv), worst_inv <= QP_TOLERANCE))
         take = ca.logic_and(success_inv, ca.logic_or(ca.logic_not(success), cost_inv < cost))
         w, success = ca.if_else(take, w_inv, w), ca.logic_or(take, success)
+        pause_next = ca.if_else(ca.logic_and(second, ca.logic_not(take)), s.second_start_pause,
+                                ca.fmax(part("paused") - 1, 0))
 
     planned = ca.if_else(success, w[0], plan[min(1, N - 1)])
     # the fallback when neither the step nor the last plan gives a finite input: never a NaN to the actuator
@@ -443,7 +449,7 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     mem_next = layout.pack(
         mem, **estimated, u_last=u, started=1, plan=ca.if_else(success, w, plan), has_plan=success,
         ref_end=refs[-1], has_ref_end=1, failures=part("failures") + ca.logic_not(success),
-        estimator_resets=part("estimator_resets") + lost)
+        estimator_resets=part("estimator_resets") + lost, paused=pause_next)
     feedback = ca.Function(f"{name}_feedback", [mem, z, window], [mem_next, u, status, predicted],
                            ["mem", "z", "ref_preview"], ["mem_next", "u", "status", "predicted"])
     return feedback, prepare, layout

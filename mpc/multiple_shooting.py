@@ -106,14 +106,16 @@ class MultipleShootingProblem(TrackingProblem):
         n_rates = N if np.isfinite(self.du_max) else 0  # no rate rows for an unbounded rate
         lower = np.concatenate((self.u_min * np.ones(N), -self.du_max * np.ones(n_rates)))
         upper = np.concatenate((self.u_max * np.ones(N), self.du_max * np.ones(n_rates)))
-        linearise, cost = self._condensed_linearisation(p.numel(), n_rates)
-        self.rti_cost = cost
+        linearise, self.rti_cost, self.rti_outcome = self._condensed_linearisation(p.numel(), n_rates)
         rti = self.solvers.rti
-        return gauss_newton_step(linearise, cost, lower, upper, step_lengths=(0.5, 0.25, 0.125), qp=rti.qp,
+        return gauss_newton_step(linearise, self.rti_cost, lower, upper, step_lengths=(0.5, 0.25, 0.125), qp=rti.qp,
                                  qp_iterations=rti.qp_iterations, line_search=rti.line_search)
 
-    def _condensed_linearisation(self, n_p: int, n_rates: int) -> tuple[ca.Function, ca.Function]:
-        """``linearise(U, p) -> (H, Jᵀr, A, g, Σ r²)`` and ``cost(U, p)`` of the condensed problem.
+    def _condensed_linearisation(self, n_p: int, n_rates: int) -> tuple[ca.Function, ca.Function, ca.Function]:
+        """The condensed problem's ``linearise``, ``cost`` and ``outcome`` Functions.
+
+        ``linearise(U, p) -> (H, Jᵀr, A, g, Σ r²)``, ``cost(U, p)`` and ``outcome(U, p) -> (cost,
+        y_N − r_N)``.
 
         Built from one model step and its Jacobians, called once per predicted sample, with
         the output sensitivities to the inputs propagated forward (``S_{k+1} = A_k S_k``,
@@ -164,7 +166,8 @@ class MultipleShootingProblem(TrackingProblem):
         for k in range(N):
             x, y = step(x, U[k], d)
             cost += s.q_output * (y - ref[k]) ** 2
-        return linearise, ca.Function("rti_cost", [U, p], [cost])
+        return (linearise, ca.Function("rti_cost", [U, p], [cost]),
+                ca.Function("rti_outcome", [U, p], [cost, y - ref[N - 1]]))
 
     def solve(self, condition, u_prev: float, ref, u_guess, x_guess=None, u_ff=None) -> Solution:
         """Solve the NLP from ``condition = [x0; d]`` for the references ``ref[0..N-1]`` = r_{k+1..k+N}.

@@ -38,6 +38,9 @@ class Solution:
     """Wall-clock time of the solve (s)."""
     cost: float = float("nan")
     """The objective at ``u_plan``, where the solver reports it (``gn``; the RTI step with ``multistart``)."""
+    end_error: float = float("nan")
+    """The planned output's error at the horizon's end, ``y_N − r_N``, where the solver reports
+    the cost."""
 
 
 def nlp_solver(name: str, nlp: dict, solver: str, settings: NlpSettings) -> ca.Function:
@@ -111,6 +114,9 @@ class TrackingProblem:
         self.rti_cost: ca.Function | None = None
         """``(w, p) -> Σ r²`` of the RTI step's problem, where it has one (single shooting, condensed
         multiple shooting)."""
+        self.rti_outcome: ca.Function | None = None
+        """``(w, p) -> (Σ r², y_N − r_N)``: the cost and the error where the plan ends, with
+        ``rti_cost`` (``multistart`` tests both)."""
         self._solver: ca.Function | None = None
         self._lam = None
 
@@ -146,6 +152,7 @@ class TrackingProblem:
         self.rti, self.compiled = compiled_or_in_process(self.rti)
         if self.settings.multistart and self.rti_cost is not None:
             self.rti_cost = compiled_or_in_process(self.rti_cost)[0]
+            self.rti_outcome = compiled_or_in_process(self.rti_outcome)[0]
 
     def _solve_rti(self, w0, p, finish) -> Solution:
         """``rti.iterations`` RTI steps from ``w0`` (one more if the last did not settle).
@@ -156,15 +163,15 @@ class TrackingProblem:
         start = time.perf_counter()
         w, qp_error, iterations = rti_steps(self.rti, w0, p, rti.iterations, rti.extra_step_tolerance)
         finite = bool(np.all(np.isfinite(w)))
-        cost = float("nan")
-        if self.settings.multistart and self.rti_cost is not None and finite:  # the cost picks between two plans
-            cost = float(self.rti_cost(w, p))
+        cost = end_error = float("nan")
+        if self.settings.multistart and self.rti_outcome is not None and finite:  # the cost picks between two plans
+            cost, end_error = (float(value) for value in self.rti_outcome(w, p))
         elapsed = time.perf_counter() - start
         ok = finite and qp_error <= QP_TOLERANCE
         u_plan, x_plan = finish(w, finite)
         status = "RTI_Step" if ok else ("RTI_Non_Finite" if not finite else "RTI_QP_Failed")
         return Solution(u_plan=u_plan, x_plan=x_plan, success=ok, status=status, iterations=iterations,
-                        solve_time=elapsed, cost=cost)
+                        solve_time=elapsed, cost=cost, end_error=end_error)
 
     def _solve_nlp(self, args: dict, warm: bool) -> tuple[np.ndarray, bool, str, int, float]:
         """One IPOPT/sqpmethod solve; returns the solution vector, success, status, iterations, time."""

@@ -75,10 +75,16 @@ class NmpcSettings:
     generated controller runs the second start's RTI steps only on the samples that take it."""
     second_start_error: float = 0.0
     """With ``multistart``, solve from the inverse model's inputs only on samples whose first
-    plan failed or costs more than this RMS error over the horizon, ``q_output · horizon ·
-    second_start_error²`` (output units; the cost includes the rate and input weights' terms;
-    0: every sample). Where the shifted plan tracks, the second solve rarely wins; skipping
-    it halves those samples' work (docs/your-actuator.md)."""
+    plan failed, or both costs more than this RMS error over the horizon, ``q_output · horizon ·
+    second_start_error²`` (output units; the cost includes the rate and input weights' terms),
+    and ends further than this from the reference (``|y_N − r_N|``); 0: every sample. Where the
+    shifted plan tracks, or misses only on the way to a reference it reaches, the second solve
+    rarely wins; skipping it halves those samples' work (docs/your-actuator.md)."""
+    second_start_pause: int = 0
+    """With ``second_start_error``, the samples after a second start that lost (the first plan
+    kept) that take no second start unless their first plan fails. A step in the reference
+    keeps the plan off for several samples while the shifted plan is already the better one;
+    a second start on each of them is work that rarely wins (docs/your-actuator.md)."""
     runtime: str = "python"
     """Where the controller runs in closed loop: ``python``; ``c``: the whole generated
     controller that ``hystmpc codegen`` writes (estimator, warm start, RTI steps,
@@ -101,6 +107,8 @@ class NmpcSettings:
         _check_finite(self, ("r_rate", "r_input"))
         _check_finite(self, ("q_output",), strict=True)
         _check_finite(self, ("second_start_error",))
+        if self.second_start_pause < 0:
+            raise ValueError(f"second_start_pause must be >= 0 (samples), got {self.second_start_pause}")
 
     def check_combination(self, solvers: SolverSettings | None = None) -> None:
         """``ValueError`` for settings that cannot go together, also with the ``solvers`` given.
@@ -131,7 +139,7 @@ class NmpcSettings:
 
 
 def second_start_cost(settings: NmpcSettings) -> float | None:
-    """The first plan's cost above which ``multistart`` solves again (None: every sample).
+    """The first plan's cost above which ``multistart`` solves again if it also ends off (None: every sample).
 
     Parameters
     ----------

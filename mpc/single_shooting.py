@@ -151,17 +151,18 @@ class SingleShootingProblem(TrackingProblem):
             if settings.solver == "gn":
                 self._build_gauss_newton(U, params, residual)
             else:
-                self._build_rti(U, params, residual, du)
+                self._build_rti(U, params, residual, du, y[N - 1] - ref[N - 1])
             return
         cost = (settings.q_output * ca.sumsqr(y - ref) + settings.r_rate * ca.sumsqr(du)
                 + settings.r_input * ca.sumsqr(U - u_ff))
         self._uses_nlp_solver({"x": U, "f": cost, "g": du if rate_bounded else ca.SX(0, 1), "p": params})
 
-    def _linearisation(self, n_params: int) -> tuple[ca.Function, ca.Function]:
-        """``linearise(U, params) -> (H, Jᵀr, A, g, Σ r²)`` and ``cost(U, params)``.
+    def _linearisation(self, n_params: int) -> tuple[ca.Function, ca.Function, ca.Function]:
+        """The RTI step's ``linearise``, ``cost`` and ``outcome`` Functions.
 
-        Both from the model's ``predict_jacobian`` and ``compact_predict`` (see
-        :func:`hystmpc.mpc.rti.gauss_newton_step`).
+        ``linearise(U, params) -> (H, Jᵀr, A, g, Σ r²)``, ``cost(U, params)`` and
+        ``outcome(U, params) -> (cost, y_N − r_N)``, all from the model's ``predict_jacobian``
+        and ``compact_predict`` (see :func:`hystmpc.mpc.rti.gauss_newton_step`).
         """
         s, N, n = self.settings, self.horizon, self.n_condition
         U, params = ca.MX.sym("U", N), ca.MX.sym("params", n_params)
@@ -179,8 +180,10 @@ class SingleShootingProblem(TrackingProblem):
         H = J.T @ J + REGULARISATION * ca.DM.eye(N)
         A, g = (ca.MX(ca.sparsify(D)), du) if self._rate_bounded else (ca.MX(0, N), ca.MX(0, 1))
         linearise = ca.Function("rti_linearise", [U, params], [H, J.T @ r, A, g, ca.sumsqr(r)])
-        cost = ca.Function("rti_cost", [U, params], [ca.sumsqr(residual(self._compact_predict(p, U)))])
-        return linearise, cost
+        outputs = self._compact_predict(p, U)
+        cost = ca.sumsqr(residual(outputs))
+        return (linearise, ca.Function("rti_cost", [U, params], [cost]),
+                ca.Function("rti_outcome", [U, params], [cost, outputs[N - 1] - ref[N - 1]]))
 
     def _build_gauss_newton(self, U, params, residual) -> None:
         N = self.horizon
@@ -201,7 +204,7 @@ class SingleShootingProblem(TrackingProblem):
                             {"print_iter": False, "print_header": False, "error_on_fail": False})
         self._qp_buffered = BufferedEvaluation(self._qp)
 
-    def _build_rti(self, U, params, residual, du) -> None:
+    def _build_rti(self, U, params, residual, du, end_error) -> None:
         """One Gauss–Newton step per sample as one Function (``rti``), compiled for ``rti-c``."""
         b, rti = self._bounds, self.solvers.rti
         rti.check_step(condensed=True)
@@ -209,14 +212,14 @@ class SingleShootingProblem(TrackingProblem):
         if (self._predict_jacobian is None) != (self._compact_predict is None):
             raise ValueError("give both predict_jacobian and compact_predict, or neither")
         if self._predict_jacobian is not None:
-            linearise, cost = self._linearisation(params.numel())
+            linearise, self.rti_cost, self.rti_outcome = self._linearisation(params.numel())
             lower = np.concatenate((b["lbx"], b["lbg"]))
             upper = np.concatenate((b["ubx"], b["ubg"]))
-            self.rti = gauss_newton_step(linearise, cost, lower, upper, step_lengths=(0.5, 0.25, 0.125), qp=rti.qp,
-                                         qp_iterations=rti.qp_iterations, line_search=rti.line_search)
-            self.rti_cost = cost
+            self.rti = gauss_newton_step(linearise, self.rti_cost, lower, upper, step_lengths=(0.5, 0.25, 0.125),
+                                         qp=rti.qp, qp_iterations=rti.qp_iterations, line_search=rti.line_search)
         else:
             self.rti_cost = ca.Function("rti_cost", [U, params], [ca.sumsqr(residual)])
+            self.rti_outcome = ca.Function("rti_outcome", [U, params], [ca.sumsqr(residual), end_error])
             residual = ca.Function("residual", [U, params], [residual])
             constraints = ca.Function("constraints", [U, params], [du if self._rate_bounded else ca.SX(0, 1)])
             self.rti = rti_function(residual, constraints, b["lbg"], b["ubg"], b["lbx"], b["ubx"],
@@ -225,13 +228,13 @@ class SingleShootingProblem(TrackingProblem):
         self._compile_rti()
 
     def _solve_gauss_newton(self, u, p):
-        """Gauss–Newton SQP: QP on JᵀJ, backtracking on the cost; returns (u, ok, status, iters, cost at u)."""
+        """Gauss–Newton SQP: QP on JᵀJ, backtracking on the cost; returns (u, ok, status, iters, residual at u)."""
         gn, N = self.solvers.gn, self.horizon
         u_prev = p[self.n_condition]
         res, J = self._gn_buffered(u, p)
         cost = float(res @ res)
         if not np.isfinite(cost):
-            return u, False, "Non_Finite_Cost", 0, cost
+            return u, False, "Non_Finite_Cost", 0, res
         for it in range(1, gn.max_iter + 1):
             H = J.T @ J + 1e-10 * np.eye(N)
             g = J.T @ res
@@ -241,7 +244,7 @@ class SingleShootingProblem(TrackingProblem):
                 args.update(a=self._A, lba=self._bounds["lbg"] - du, uba=self._bounds["ubg"] - du)
             step = self._qp_buffered(**args)[0]
             if not np.all(np.isfinite(step)):
-                return u, False, "QP_Failed", it, cost
+                return u, False, "QP_Failed", it, res
             t = 1.0
             while t > 1e-3:
                 trial = u + t * step
@@ -252,14 +255,14 @@ class SingleShootingProblem(TrackingProblem):
                 t *= 0.5
             else:  # no descent left: stationary, unless the cost stopped being a number
                 finite = np.isfinite(cost_t)
-                return u, bool(finite), "Solve_Succeeded" if finite else "Non_Finite_Cost", it, cost
+                return u, bool(finite), "Solve_Succeeded" if finite else "Non_Finite_Cost", it, res
             stalled = cost - cost_t < gn.ftol * cost
             u, res, cost = trial, res_t, cost_t
             if np.max(np.abs(t * step)) <= gn.tol * (1.0 + np.max(np.abs(u))) or stalled:
-                return u, True, "Solve_Succeeded", it, cost
+                return u, True, "Solve_Succeeded", it, res
             if it < gn.max_iter:  # the Jacobian at the accepted trial, for the next step only
                 J = self._gn_buffered(u, p)[1]
-        return u, False, "Maximum_Iterations_Exceeded", gn.max_iter, cost
+        return u, False, "Maximum_Iterations_Exceeded", gn.max_iter, res
 
     def solve(self, condition, u_prev: float, ref, u_guess, x_guess=None, u_ff=None) -> Solution:
         """Solve for the references ``ref`` (r_{k+1..k+N}) from ``condition`` (the ``p`` of ``predict``).
@@ -293,11 +296,13 @@ class SingleShootingProblem(TrackingProblem):
                                    lambda w, finite: (w.reshape(N, 1), None))
         if self.settings.solver == "gn":
             start = time.perf_counter()
-            u, success, status, iterations, cost = self._solve_gauss_newton(u_guess, p)
+            u, success, status, iterations, residual = self._solve_gauss_newton(u_guess, p)
             elapsed = time.perf_counter() - start
             success = success and bool(np.all(np.isfinite(u)))
+            end_error = residual[N - 1] / np.sqrt(self.settings.q_output)  # the residual's first N: √q (y - r)
             return Solution(u_plan=u.reshape(N, 1), x_plan=None, success=success, status=status,
-                            iterations=iterations, solve_time=elapsed, cost=cost)
+                            iterations=iterations, solve_time=elapsed, cost=float(residual @ residual),
+                            end_error=float(end_error))
         u, success, status, iterations, elapsed = self._solve_nlp({"x0": u_guess, "p": p, **self._bounds}, warm=True)
         return Solution(u_plan=u.reshape(N, 1), x_plan=None, success=success, status=status,
                         iterations=iterations, solve_time=elapsed)

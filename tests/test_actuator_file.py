@@ -307,7 +307,9 @@ def test_the_pid_baselines_get_a_notch_only_for_a_lightly_damped_mode(piezo):
 
 def test_the_nmpcs_second_start_and_horizon_follow_the_span_and_the_rate(piezo):
     """The second start is taken where the first plan misses by 0.25 % of the output span (RMS
-    over the horizon); the horizon's cap is 40 samples up to 1 kHz and shrinks with the rate."""
+    over the horizon and at its end); above 1 kHz not for a quarter of the horizon after one that
+    lost, and the RTI step keeps a full step that descends; the horizon's cap is 40 samples up to
+    1 kHz and shrinks with the rate."""
     import dataclasses
 
     from hystmpc.experiments.actuator_file import SECOND_START_SHARE, ActuatorSpec
@@ -315,9 +317,13 @@ def test_the_nmpcs_second_start_and_horizon_follow_the_span_and_the_rate(piezo):
     nmpc = spec._configured()["nmpc"]
     span = spec.output_range[1] - spec.output_range[0]
     assert nmpc.multistart and nmpc.second_start_error == pytest.approx(SECOND_START_SHARE * span)
+    assert nmpc.second_start_pause == 0  # 1 kHz: no pause
     assert spec.sample_period == 1e-3 and spec._longest_horizon() == 40 and nmpc.horizon <= 40
     for period, cap in ((0.5e-3, 20), (0.25e-3, 10), (0.1e-3, 10), (2e-3, 40)):
         spec.sample_period = period
         assert spec._longest_horizon() == cap, period
+        configured = spec._configured()
+        assert configured["nmpc"].second_start_pause == (cap // 4 if period < 1e-3 else 0)
+        assert configured["solver"].rti.line_search == ("descent" if period < 1e-3 else "best")
     spec.sample_period, spec.dynamics = 0.2e-3, dataclasses.replace(spec.dynamics, delay_samples=12)
     assert spec._longest_horizon() == 14  # 2 samples past the dead time

@@ -57,6 +57,9 @@ def _python_and_generated(bench_name: str, scenario: str, duration: float, assig
     # and with r_input > 0 (the inverse every sample, reused by the second start)
     ("pam", "square-20", 4.0, 1.0, ("nmpc.multistart=true", "nmpc.second_start_error=0.5", "nmpc.warm_start=shift")),
     ("pam", "square-20", 4.0, 1.0, ("nmpc.multistart=true", "nmpc.second_start_error=0.5", "nmpc.r_input=0.01")),
+    # ... and none for 3 samples after one that lost
+    ("pam", "square-20", 4.0, 1.0, ("nmpc.multistart=true", "nmpc.second_start_error=0.5",
+                                    "nmpc.second_start_pause=3")),
 ])
 def test_the_functions_repeat_the_python_controller(bench_name, scenario, duration, moves, assignments):
     python, generated, functions = _python_and_generated(bench_name, scenario, duration, assignments)
@@ -124,7 +127,7 @@ def test_the_rti_steps_expressions_repeat_rti_steps(nan_first, tolerance):
 
 def test_memory_layout_packs_the_named_parts_in_order():
     layout = MemoryLayout((("x", 3), ("d", 1), ("P", 16)), horizon=4, initial_values=(("x", (0.0, 1.0, 0.0)),))
-    assert layout.size == 3 + 1 + 16 + 1 + 1 + 4 + 1 + 1 + 1 + 1 + 1
+    assert layout.size == 3 + 1 + 16 + 1 + 1 + 4 + 1 + 1 + 1 + 1 + 1 + 1
     assert list(layout.initial()[:4]) == [0.0, 1.0, 0.0, 0.0] and not layout.initial()[4:].any()
     mem = ca.MX.sym("mem", layout.size)
     f = ca.Function("f", [mem], [layout.pack(mem, u_last=7.0, plan=ca.DM([1, 2, 3, 4]))])

@@ -106,6 +106,7 @@ def test_failed_solve_falls_back_and_is_counted():
     ({"solver": "nosuch"}, "allowed: ipopt, sqp"),
     ({"warm_start": "hot"}, "allowed: inverse, shift, cold"),
     ({"q_output": 0.0}, "q_output must be finite and > 0"),
+    ({"second_start_pause": -1}, "second_start_pause must be >= 0"),
 ])
 def test_settings_validation(change, match):
     with pytest.raises(ValueError, match=match):
@@ -131,3 +132,26 @@ def test_extra_disturbances_reach_the_dynamics_only():
     for bad in (0, 1.5, True):
         with pytest.raises(ValueError, match="disturbances must be an integer >= 1"):
             Dynamics(state_names=("v",), rhs=lambda x, u, h, d: [x[0]], disturbances=bad)
+
+
+def test_the_second_start_waits_for_a_plan_that_costs_more_and_ends_off():
+    """Off: a failed plan; else, unless paused, one that costs more than ``q·N·e²`` and ends
+    further than ``e`` from the reference (a NaN counts as over)."""
+    from hystmpc.mpc.controller import NmpcController
+    from hystmpc.mpc.problem import Solution
+
+    settings = NmpcSettings(horizon=10, q_output=4.0, multistart=True, second_start_error=0.5)
+    judge = NmpcController.__new__(NmpcController)  # the test reads the settings alone
+    judge.settings = settings
+    limit = 4.0 * 10 * 0.5 ** 2
+
+    def off(success=True, cost=2 * limit, end=1.0, paused=False):
+        plan = Solution(u_plan=np.zeros((10, 1)), x_plan=None, success=success, status="", iterations=1,
+                        solve_time=0.0, cost=cost, end_error=end)
+        return judge._plan_is_off(plan, paused)
+
+    assert off() and off(end=-1.0) and off(cost=np.nan) and off(end=np.nan)
+    assert not off(cost=limit) and not off(end=0.5) and not off(end=-0.4)  # costs little, or ends on
+    assert not off(paused=True) and off(success=False, paused=True, cost=0.0, end=0.0)
+    judge.settings = replace(settings, second_start_error=0.0)
+    assert off(cost=0.0, end=0.0, paused=True)  # 0: every sample

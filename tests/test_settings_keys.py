@@ -35,15 +35,17 @@ ACTIVATE = {
     "solver.gn.": ["nmpc.solver=gn"],
     "ccore.": ["rig.core=C"], "pi.derivative_filter": ["pi.kd=0.05"],
     "nmpc.warm_start": ["nmpc.multistart=false"], "nmpc.second_start_error": ["nmpc.multistart=true"],
+    "nmpc.second_start_pause": ["nmpc.multistart=true", "nmpc.second_start_error=1e-9"],
 }
 """Key prefix -> the assignments that switch on what reads it (applied to both runs)."""
 VALUES = {"max_iter": "1", "tol": "1e-12", "ftol": "0.5", "pressure_delay_s": "0.06", "solver": None,
           "warm_start": "shift", "core": "C", "iterations": "3", "qp_iterations": "12", "dp_limit": "2.0",
           "angle_limit": "0.05", "amplifier_bandwidth": "1.0", "extra_step_tolerance": "1e-12",
-          "second_start_error": "1e6"}
+          "second_start_error": "1e6", "second_start_pause": "1000"}
 """Field name -> the changed value, where the generic rule would not act (or is invalid): iteration
 limits that bind, input limits inside the test's inputs, an amplifier slower than the slew limit, an extra
-RTI step taken on (almost) every sample, a second start on no sample."""
+RTI step taken on (almost) every sample, a second start on no sample (and none after the first
+that lost, where every plan is off)."""
 OTHER_SOLVER = {"pam": "sqp", "compliant": "sqp", "reluctance": "ipopt", "dea": "ipopt"}
 
 
