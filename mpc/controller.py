@@ -242,6 +242,7 @@ class NmpcController:
         jump = (self._last_ref_end is not None
                 and abs(refs[-1] - self._last_ref_end) > self.jump_threshold)
         self._last_ref_end = refs[-1]
+        paused, self._paused = self._paused > 0, max(self._paused - 1, 0)  # counts every sample, as in C
         if estimate_lost:  # a failure: the restarted estimate has not seen one update yet
             result = Solution(u_plan=np.full((N, 1), np.nan), x_plan=None, success=False,
                               status="Non_Finite_Estimate", iterations=0, solve_time=0.0)
@@ -252,7 +253,6 @@ class NmpcController:
             u_ff = u_inv() if self.settings.r_input > 0 else np.zeros(N)  # zero weight: value unused
             condition = self.observer.condition(est)
             result = self.problem.solve(condition, self._u_last, refs, u_guess, x_guess, u_ff=u_ff)
-            paused, self._paused = self._paused > 0, max(self._paused - 1, 0)
             if self.settings.multistart and not from_inverse and self._plan_is_off(result, paused):
                 self.second_starts += 1
                 other = self.problem.solve(condition, self._u_last, refs, u_inv(), None, u_ff=u_ff)
