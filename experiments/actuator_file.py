@@ -62,7 +62,7 @@ _WARNED: set[str] = set()
 reach: the path; a linear block above Nyquist: the path with "#nyquist")."""
 SECOND_START_SHARE = 0.0025
 """The NMPC solves from the inverse model's inputs too where its first plan misses the
-reference by this share of the output span (RMS over the horizon): where the shifted plan
+reference by this share of the output span (RMS over the horizon, and at its end): where the shifted plan
 tracks, the second start hardly ever wins (docs/your-actuator.md)."""
 GROUP_TABLES = ("nmpc", "smoothing", "solver", "pid", "inverse_ff_pid", "lmpc")
 """Optional tables that set the groups of the same name (as ``--set`` would)."""
@@ -343,8 +343,9 @@ class ActuatorSpec:
     def _tight_period(self) -> bool:
         """Above 1 kHz: the NMPC trades a little optimality per sample for the period.
 
-        There a second start that lost pauses them for a quarter of the horizon, and the RTI
-        step takes its full step where it lowers the cost (line search ``descent``). On the
+        There a second start that did not win pauses second starts for a quarter of the default
+        horizon (a file's own ``[nmpc]`` horizon keeps it), and the RTI step takes its full step
+        where it lowers the cost (line search ``descent``). On the
         held-out stages, both kept the 2 kHz stage's RMSE within 1 % and its p95 step under a
         quarter of the period, but each cost up to 17 % and 57 % on a 1 kHz stage where second
         starts win in a row (docs/your-actuator.md).

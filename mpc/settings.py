@@ -81,8 +81,8 @@ class NmpcSettings:
     shifted plan tracks, or misses only on the way to a reference it reaches, the second solve
     rarely wins; skipping it halves those samples' work (docs/your-actuator.md)."""
     second_start_pause: int = 0
-    """With ``second_start_error``, the samples after a second start that lost (the first plan
-    kept) that take no second start unless their first plan fails. A step in the reference
+    """With ``second_start_error``, the samples after a second start that did not win (the first
+    plan kept, or both failed) that take no second start unless their first plan fails. A step in the reference
     keeps the plan off for several samples while the shifted plan is already the better one;
     a second start on each of them is work that rarely wins (docs/your-actuator.md)."""
     runtime: str = "python"
