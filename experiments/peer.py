@@ -1,4 +1,4 @@
-"""The same NMPC problem in do-mpc and in acados, to check hystmpc against its peers and to time them.
+"""The same NMPC problem in do-mpc, to check hystmpc against a peer and to time both.
 
 Optional: needs the ``bench`` extra (``pip install -e '.[bench]'``). Used by the benchmark
 in :func:`compare_with_do_mpc` and a slow test only.
@@ -10,10 +10,8 @@ disturbance are time-varying parameters; ``rterm`` is the rate weight; the stage
 ``x_k`` (k = 1..N−1) plus the terminal cost on ``x_N`` is hystmpc's Σ_{k=1..N} q (y_k − r_k)²
 (the k = 0 term is a constant).
 
-The acados twin (:func:`acados_rti_timing`) takes one SQP_RTI step on the problems hystmpc's
-generated step was called with in a closed-loop run, and times both on the same problems.
-acados is not a dependency: it needs the ``comma-deps-acados`` wheel unpacked somewhere
-(its ``acados`` folder; the wheel also carries its own CasADi, which must not replace ours).
+The acados twin is :mod:`hystmpc.experiments.peer_acados`; ``python -m
+hystmpc.experiments.peer acados ACADOS_FOLDER [BENCH]`` runs it.
 """
 
 from __future__ import annotations
@@ -315,196 +313,15 @@ def benchmark(bench_name: str = "pam", duration: float = 20.0) -> dict:
             "ratio_standalone": theirs["step_ms_median"] / (ours["standalone_c"]["median_us"] / 1e3)}
 
 
-ACADOS_QP_SOLVERS = ("FULL_CONDENSING_QPOASES", "FULL_CONDENSING_HPIPM", "PARTIAL_CONDENSING_HPIPM")
-
-
-def acados_rti_timing(acados_package, bench_name: str = "pam", qp_solvers=ACADOS_QP_SOLVERS,
-                      repeats: int = 3, rounds: int = 2, work=None) -> dict:
-    """Acados' SQP_RTI step and hystmpc's generated RTI step on the same recorded problems.
-
-    hystmpc's controller runs the bench's default scenario (``rti``, every ``(w, p)`` its step
-    is called with recorded); acados gets the same OCP: the state augmented with the last
-    input, the stage cost ``q (y(f(x_k, u_k)) − r_k)² + r_rate Δu_k² + r_input (u_k − u_ff,k)²``
-    (Gauss–Newton), the input bounds, the rate bound as a linear constraint, the same
-    regularisation (``levenberg_marquardt``), initialised with hystmpc's guess and its rollout.
-    Each QP solver is built once and timed with acados' own ``time_tot`` over ``repeats``
-    passes, each timing right after one of hystmpc's standalone C step (``rti_main``,
-    ``repeats`` passes) on the same problems; ``rounds`` rounds over all the QP solvers.
-    Needs a bench whose NMPC is a condensed multiple-shooting problem with a rate bound (pam,
-    compliant, reluctance).
-
-    Parameters
-    ----------
-    acados_package : path
-        The ``acados`` folder of the unpacked ``comma-deps-acados`` wheel (``install/`` with
-        the libraries, headers and ``t_renderer``; ``acados_template/``).
-    bench_name : str, optional
-        The bench.
-    qp_solvers : tuple of str, optional
-        Acados' QP solvers to time (default: :data:`ACADOS_QP_SOLVERS`).
-    repeats : int, optional
-        Passes over the recorded problems per timing.
-    rounds : int, optional
-        Rounds over all the QP solvers.
-    work : path, optional
-        Where the generated acados and hystmpc code goes (default: a temporary folder).
-
-    Returns
-    -------
-    dict
-        ``bench``, ``scenario``, ``problems``, ``repeats``, ``ca_version`` and ``rows``: per
-        round and QP solver, acados' median and p95 (µs), its first inputs' differences from
-        hystmpc's step, and hystmpc's median and p95 (µs) with ``acados_over_hystmpc``.
-    """
-    import ctypes
-    import os
-    import sys
-    from pathlib import Path
-    from tempfile import TemporaryDirectory
-
-    from hystmpc.experiments.benches import get_bench
-    from hystmpc.experiments.realtime import write_solver
-    from hystmpc.mpc.codegen import RecordingStep, run_program
-    from hystmpc.mpc.rti import REGULARISATION
-
-    package = Path(acados_package).resolve()
-    if not (package / "acados_template" / "acados_layout.json").is_file() or not (package / "install").is_dir():
-        raise ValueError(f"{package} is not the acados folder of the comma-deps-acados wheel "
-                         "(it needs acados_template/ and install/)")
-    from hystmpc.mpc.multiple_shooting import MultipleShootingProblem
-    bench = get_bench(bench_name)
-    config = bench.configure(["nmpc.solver=rti"])
-    prepared = bench.prepare(bench.default_scenario, "nmpc", config)
-    problem = prepared.controller.problem
-    if not (isinstance(problem, MultipleShootingProblem) and problem.condensed and np.isfinite(problem.du_max)):
-        raise ValueError(f"bench {bench_name!r}: the acados twin needs a condensed multiple-shooting NMPC with a "
-                         "rate bound (pam, compliant, reluctance)")
-    problem.rti = RecordingStep(problem.rti)
-    bench.run(bench.default_scenario, "nmpc", prepared=prepared)
-    calls = np.asarray(problem.rti.calls)
-    with contextlib.ExitStack() as stack:
-        work = Path(work) if work else Path(stack.enter_context(TemporaryDirectory()))
-        source = _acados_source_layout(package, work / "acados")
-        importable = work / "import"
-        importable.mkdir(parents=True, exist_ok=True)
-        if not (importable / "acados").exists():
-            (importable / "acados").symlink_to(package)  # acados alone: not the wheel's CasADi
-        sys.path.insert(0, str(importable))
-        stack.callback(sys.path.remove, str(importable))
-        previous = os.environ.get("ACADOS_SOURCE_DIR")
-        os.environ["ACADOS_SOURCE_DIR"] = str(source)
-        stack.callback(_restore_environment, "ACADOS_SOURCE_DIR", previous)
-        for library in ("libblasfeo.so", "libhpipm.so", "libqpOASES_e.so.3.1", "libacados.so"):
-            ctypes.CDLL(str(package / "install" / "lib" / library), mode=ctypes.RTLD_GLOBAL)  # for the solver's
-        write_solver(bench, config, work / "hystmpc")
-        solvers = {qp: _acados_solver(problem, qp, work / qp.lower(), REGULARISATION, float(bench.sample_period))
-                   for qp in qp_solvers}
-        rows = []
-        for _ in range(rounds):
-            for qp, solver in solvers.items():
-                _, ours = run_program(work / "hystmpc", calls, problem.settings.horizon, repeats=repeats)
-                theirs = {"qp": qp, **_acados_timing(problem, solver, calls, repeats)}
-                rows.append({**theirs, "hystmpc_median_us": ours["median_us"], "hystmpc_p95_us": ours["p95_us"],
-                             "acados_over_hystmpc": theirs["median_us"] / ours["median_us"]})
-    return {"bench": bench_name, "scenario": bench.default_scenario, "problems": len(calls), "repeats": repeats,
-            "ca_version": ca.__version__, "rows": rows}
-
-
-def _acados_source_layout(package, folder):
-    """The folder layout acados_template expects of ACADOS_SOURCE_DIR, as links into the wheel."""
-    folder.mkdir(parents=True, exist_ok=True)
-    for name in ("bin", "lib", "include"):
-        if not (folder / name).exists():
-            (folder / name).symlink_to(package / "install" / name)
-    template = folder / "interfaces" / "acados_template"
-    template.mkdir(parents=True, exist_ok=True)
-    if not (template / "acados_template").exists():
-        (template / "acados_template").symlink_to(package / "acados_template")
-    return folder
-
-
-def _restore_environment(key: str, value: str | None) -> None:
-    import os
-    if value is None:
-        os.environ.pop(key, None)
-    else:
-        os.environ[key] = value
-
-
-def _acados_solver(problem, qp: str, folder, regularisation: float, dt: float):
-    """Acados' SQP_RTI solver of ``problem`` with the QP solver ``qp``, generated and built in ``folder``."""
-    from acados.acados_template import AcadosModel, AcadosOcp, AcadosOcpSolver
-    m, s = problem.model, problem.settings
-    N, nx, nd = s.horizon, m.nx, m.nd
-    x, u_last, u = ca.SX.sym("x", nx), ca.SX.sym("u_last"), ca.SX.sym("u")
-    d, ref, u_ff = ca.SX.sym("d", nd), ca.SX.sym("ref"), ca.SX.sym("u_ff")
-    x_next = m.step(x, u, d)
-    model = AcadosModel()
-    model.name = f"twin_{qp.lower()}"
-    model.x, model.u, model.p = ca.vertcat(x, u_last), u, ca.vertcat(d, ref, u_ff)
-    model.disc_dyn_expr = ca.vertcat(x_next, u)
-    model.cost_y_expr = ca.vertcat(m.output(x_next, d) - ref, u - u_last, u - u_ff)
-    ocp = AcadosOcp()
-    ocp.model = model
-    ocp.dims.N = N
-    ocp.solver_options.tf = N * dt
-    ocp.cost.cost_type, ocp.cost.cost_type_e = "NONLINEAR_LS", "LINEAR_LS"
-    ocp.cost.W, ocp.cost.yref = np.diag([s.q_output, s.r_rate, s.r_input]), np.zeros(3)
-    ocp.cost.Vx_e, ocp.cost.W_e, ocp.cost.yref_e = np.zeros((0, nx + 1)), np.zeros((0, 0)), np.zeros(0)
-    ocp.constraints.idxbu = np.array([0])
-    ocp.constraints.lbu, ocp.constraints.ubu = np.array([problem.u_min]), np.array([problem.u_max])
-    ocp.constraints.C = np.concatenate((np.zeros((1, nx)), [[-1.0]]), axis=1)
-    ocp.constraints.D = np.array([[1.0]])
-    ocp.constraints.lg, ocp.constraints.ug = np.array([-problem.du_max]), np.array([problem.du_max])
-    ocp.constraints.x0 = np.zeros(nx + 1)
-    ocp.parameter_values = np.zeros(nd + 2)
-    options = ocp.solver_options
-    options.integrator_type, options.nlp_solver_type, options.hessian_approx = "DISCRETE", "SQP_RTI", "GAUSS_NEWTON"
-    options.levenberg_marquardt, options.qp_solver = regularisation, qp
-    ocp.code_export_directory = str(folder)
-    with contextlib.redirect_stdout(None):
-        return AcadosOcpSolver(ocp, json_file=str(folder) + ".json", verbose=False)
-
-
-def _acados_timing(problem, solver, calls, repeats: int) -> dict:
-    """``solver`` timed on ``calls`` (µs, its own ``time_tot``); its first inputs against hystmpc's step."""
-    m, N = problem.model, problem.settings.horizon
-    nx, nd = m.nx, m.nd
-    times, differences = [], []
-    for repeat in range(repeats):
-        for call in calls:
-            w0, p = call[:N], call[N:]
-            x0, d0, u_prev = p[:nx], p[nx:nx + nd], p[nx + nd]
-            refs, u_ffs = p[nx + nd + 1: nx + nd + 1 + N], p[nx + nd + 1 + N:]
-            states = np.asarray(problem.rollout(w0, p))
-            lasts = np.concatenate(([u_prev], w0))
-            for k in range(N + 1):
-                solver.set(k, "x", np.concatenate((states[k], [lasts[k]])))
-                solver.set(k, "p", np.concatenate((d0, [refs[min(k, N - 1)], u_ffs[min(k, N - 1)]])))
-                if k < N:
-                    solver.set(k, "u", np.array([w0[k]]))
-            solver.constraints_set(0, "lbx", np.concatenate((x0, [u_prev])))
-            solver.constraints_set(0, "ubx", np.concatenate((x0, [u_prev])))
-            solver.solve()
-            times.append(1e6 * solver.get_stats("time_tot"))
-            if repeat == 0:
-                ours = float(np.asarray(problem.rti.fun(w0, p)[0]).ravel()[0])
-                differences.append(abs(float(solver.get(0, "u")[0]) - ours))
-    differences = np.asarray(differences)
-    return {"median_us": float(np.median(times)), "p95_us": float(np.percentile(times, 95)),
-            "first_input_difference_median": float(np.median(differences)),
-            "first_input_difference_max": float(differences.max()),
-            "share_within_1e-6": float(np.mean(differences <= 1e-6))}
-
-
 if __name__ == "__main__":  # python -m hystmpc.experiments.peer [BENCH | acados ACADOS_FOLDER]: as JSON
     import json
     import sys
     if sys.argv[1:2] == ["acados"]:
-        if len(sys.argv) != 3:
-            print("usage: python -m hystmpc.experiments.peer acados ACADOS_FOLDER (the unpacked wheel's acados/)",
-                  file=sys.stderr)
+        if len(sys.argv) not in (3, 4):
+            print("usage: python -m hystmpc.experiments.peer acados ACADOS_FOLDER [BENCH] (ACADOS_FOLDER: the "
+                  "unpacked wheel's acados/)", file=sys.stderr)
             sys.exit(2)
-        print(json.dumps(acados_rti_timing(sys.argv[2]), indent=1))
+        from hystmpc.experiments.peer_acados import acados_rti_timing
+        print(json.dumps(acados_rti_timing(sys.argv[2], *sys.argv[3:]), indent=1))
     else:
         print(json.dumps(benchmark(sys.argv[1] if len(sys.argv) > 1 else "pam"), indent=1))

@@ -10,6 +10,11 @@ from hystmpc.mpc.problem import Solution, TrackingProblem
 from hystmpc.mpc.rti import REGULARISATION, gauss_newton_step, rti_function
 from hystmpc.mpc.settings import InputBounds, NmpcSettings, SolverSettings
 
+STRAIGHT_LINE_CONDENSING_LIMIT = 40_000
+"""Most operations of the straight-line condensing (:func:`condensing_function`): beyond, the
+C and its compile grow too long (pam's 17,461 operations: 575 kB of C, 11 s to compile), and the
+sensitivities are propagated as matrix products."""
+
 
 class MultipleShootingProblem(TrackingProblem):
     """Minimise Σ q (y_k − r_k)² + r_rate Δu² + r_input (u − u_ff)² over states and inputs.
@@ -119,9 +124,14 @@ class MultipleShootingProblem(TrackingProblem):
 
         Built from one model step and its Jacobians, called once per predicted sample, with
         the output sensitivities to the inputs propagated forward (``S_{k+1} = A_k S_k``,
-        plus ``B_k`` as the newest column; ``solver.rti.sensitivity_block`` pads them).
-        Differentiating the unrolled rollout instead gives the same numbers but one expression
-        per entry of J: far more C and a far longer compile (docs/realtime.md).
+        plus ``B_k`` as the newest column). By default the propagation and ``JᵀJ`` are one
+        straight-line function of the Jacobians (:func:`condensing_function`), whose products
+        skip the structural zeros of ``A_k``, ``B_k`` and ``C_k`` with no index loops. Beyond
+        :data:`STRAIGHT_LINE_CONDENSING_LIMIT` operations, or with ``solver.rti.sensitivity_block``
+        > 0 (padded to a few sizes, for less RAM), they are CasADi's sparse matrix products
+        instead. All give the same numbers. Differentiating the unrolled
+        rollout instead gives them too but one expression of the model per entry of J: far
+        more C and a far longer compile (docs/realtime.md).
         """
         m, s = self.model, self.settings
         N, nx, nd = s.horizon, m.nx, m.nd
@@ -141,23 +151,21 @@ class MultipleShootingProblem(TrackingProblem):
         du = D @ U - ca.vertcat(u_prev, ca.DM.zeros(N - 1))
         H_const = s.r_rate * (D.T @ D) + (s.r_input + REGULARISATION) * ca.DM.eye(N)
         grad = s.r_rate * (D.T @ du) + s.r_input * (U - u_ff)
-        block = self.solvers.rti.sensitivity_block
-        x, S, errors, rows = x0, None, [], []
+        x, errors, jacobians = x0, [], []
         for k in range(N):
             x, y, A, B, Cy = step_linear(x, U[k], d)
-            if block:  # one size for several k: CasADi reuses a work slot only for a value of the same size
-                width = min(N, -(-(k + 1) // block) * block)
-                if S is not None and S.size2() < width:
-                    S = ca.horzcat(S, ca.DM.zeros(nx, width - S.size2()))
-                newest = B @ ca.DM(ca.Sparsity.triplet(1, width, [0], [k]), 1.0)  # B in column k
-                S = ca.densify(newest if S is None else A @ S + newest)
-            else:
-                S = B if S is None else ca.horzcat(A @ S, B)
             errors.append(y - ref[k])
-            rows.append(ca.horzcat(Cy @ S, ca.MX(1, N - S.size2())))
-        e, Jy = ca.vertcat(*errors), ca.vertcat(*rows)
-        H = s.q_output * (Jy.T @ Jy) + H_const
-        grad = grad + s.q_output * (Jy.T @ e)
+            jacobians.append((A, B, Cy))
+        e = ca.vertcat(*errors)
+        block = self.solvers.rti.sensitivity_block
+        condense = None if block else condensing_function(*(step_linear.sparsity_out(i) for i in (2, 3, 4)), N)
+        if condense is not None and condense.n_instructions() <= STRAIGHT_LINE_CONDENSING_LIMIT:
+            JtJ, Jte = condense(*(J for stage in jacobians for J in stage), e)
+        else:
+            Jy = _propagated_sensitivities(jacobians, block)
+            JtJ, Jte = Jy.T @ Jy, Jy.T @ e
+        H = s.q_output * JtJ + H_const
+        grad = grad + s.q_output * Jte
         rates = du[:n_rates]
         A_rates = D[:n_rates, :]
         x, cost = x0, s.r_rate * ca.sumsqr(du) + s.r_input * ca.sumsqr(U - u_ff)
@@ -216,3 +224,60 @@ class MultipleShootingProblem(TrackingProblem):
         w, success, status, iterations, elapsed = self._solve_nlp(args, warm=x_guess is not None)
         return Solution(u_plan=w[self._n_shoot:].reshape(N, 1), x_plan=w[: self._n_shoot].reshape(N + 1, nx),
                         success=success, status=status, iterations=iterations, solve_time=elapsed)
+
+
+def condensing_function(A_sparsity: ca.Sparsity, B_sparsity: ca.Sparsity, C_sparsity: ca.Sparsity,
+                        horizon: int) -> ca.Function:
+    """``condense(A_0, B_0, C_0, …, A_{N−1}, B_{N−1}, C_{N−1}, e) -> (JᵀJ, Jᵀe)`` as straight-line SX.
+
+    ``J`` holds the outputs' sensitivities to the inputs, row ``k`` being ``C_k S_k`` with
+    ``S_0 = B_0`` and ``S_k = [A_k S_{k−1}, B_k]``: ``A_k``, ``B_k`` are the model step's
+    Jacobians to the state and the input at sample ``k``, ``C_k`` the output's Jacobian at the
+    state it reaches. The products are expanded entry by entry at build time, so only the
+    structural nonzeros of the given sparsities cost operations; ``JᵀJ`` is computed on its
+    lower triangle and mirrored.
+
+    Parameters
+    ----------
+    A_sparsity, B_sparsity, C_sparsity : casadi.Sparsity
+        Sparsities of ``A_k`` (nx × nx), ``B_k`` (nx × 1) and ``C_k`` (1 × nx).
+    horizon : int
+        ``N``.
+
+    Returns
+    -------
+    casadi.Function
+        ``condense``; ``e`` has ``N`` entries.
+    """
+    N = horizon
+    inputs, S, rows = [], None, []
+    for k in range(N):
+        A, B, C = (ca.SX.sym(f"{name}_{k}", sparsity)
+                   for name, sparsity in (("A", A_sparsity), ("B", B_sparsity), ("C", C_sparsity)))
+        inputs += [A, B, C]
+        S = B if S is None else ca.horzcat(A @ S, B)
+        rows.append(ca.horzcat(C @ S, ca.SX(1, N - S.size2())))
+    e = ca.SX.sym("e", N)
+    J = ca.vertcat(*rows)
+    return ca.Function("condense", [*inputs, e], [ca.tril2symm(ca.tril(J.T @ J)), J.T @ e])
+
+
+def _propagated_sensitivities(jacobians, block: int) -> ca.MX:
+    """``J`` (N × N) from the stages' ``(A_k, B_k, C_k)`` as matrix products (see :func:`condensing_function`).
+
+    With ``block`` > 0 the sensitivities are padded with exact zeros to a multiple of ``block``
+    columns: CasADi reuses a work slot only for a value of the same size.
+    """
+    N = len(jacobians)
+    S, rows = None, []
+    for k, (A, B, C) in enumerate(jacobians):
+        if block:
+            width = min(N, -(-(k + 1) // block) * block)
+            if S is not None and S.size2() < width:
+                S = ca.horzcat(S, ca.DM.zeros(S.size1(), width - S.size2()))
+            newest = B @ ca.DM(ca.Sparsity.triplet(1, width, [0], [k]), 1.0)  # B in column k
+            S = ca.densify(newest if S is None else A @ S + newest)
+        else:
+            S = B if S is None else ca.horzcat(A @ S, B)
+        rows.append(ca.horzcat(C @ S, ca.MX(1, N - S.size2())))
+    return ca.vertcat(*rows)

@@ -180,19 +180,27 @@ def test_an_exact_memory_with_an_ekf_on_the_dynamics_repeats_the_python_controll
     assert np.ptp(generated.input) > 0.1
 
 
-def test_padded_sensitivities_give_the_same_inputs_to_the_last_bit_in_less_memory():
-    """solver.rti.sensitivity_block pads the condensed step's sensitivities with exact zeros:
-    the closed loop is the same bit for bit, and the step's work vector shrinks (RAM in C)."""
+def test_padded_sensitivities_give_the_same_inputs_to_the_last_bit_in_less_memory(monkeypatch):
+    """The condensed step's sensitivities as straight-line code (the default), as matrix products
+    of their exact widths (past the size limit), and padded with exact zeros
+    (solver.rti.sensitivity_block): the closed loop is the same bit for bit, and padding shrinks
+    the step's work vector against the exact widths (RAM in C)."""
+    from hystmpc.mpc import multiple_shooting
     bench = get_bench("pam")
-    runs, work = [], []
-    for block in (0, 5):
+    runs, work = {}, {}
+    for name, block, limit in (("straight", 0, multiple_shooting.STRAIGHT_LINE_CONDENSING_LIMIT),
+                               ("products", 0, 0), ("padded", 5, 0)):
+        monkeypatch.setattr(multiple_shooting, "STRAIGHT_LINE_CONDENSING_LIMIT", limit)
         config = bench.configure(["nmpc.solver=rti", f"solver.rti.sensitivity_block={block}"])
         prepared = bench.prepare("square-20", "nmpc", config)
-        work.append(prepared.controller.problem.rti.sz_w())
-        runs.append(bench.run("square-20", "nmpc", duration=3.0, prepared=prepared))
-    assert np.array_equal(runs[0].input, runs[1].input)
-    assert np.ptp(runs[0].input) > 1.0  # a step of the square was tracked
-    assert work[1] < 0.9 * work[0], work
+        rti = prepared.controller.problem.rti
+        assert any(f.name() == "condense" for f in rti.find_functions()) == (name == "straight")
+        work[name] = rti.sz_w()
+        runs[name] = bench.run("square-20", "nmpc", duration=3.0, prepared=prepared)
+    assert np.array_equal(runs["straight"].input, runs["products"].input)
+    assert np.array_equal(runs["products"].input, runs["padded"].input)
+    assert np.ptp(runs["straight"].input) > 1.0  # a step of the square was tracked
+    assert work["padded"] < 0.9 * work["products"], work
 
 
 @pytest.mark.parametrize(("bench_name", "assignments", "match"), [

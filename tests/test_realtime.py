@@ -256,6 +256,35 @@ def test_condensed_rti_step_without_a_rate_bound():
     assert result.u_plan.ravel() == pytest.approx(np.ones(4), abs=1e-6)  # the target is out of reach: u at its bound
 
 
+def test_the_straight_line_condensing_is_the_product_of_the_propagated_sensitivities():
+    """``condensing_function`` gives JᵀJ and Jᵀe of J built row by row from S_k = [A_k S_{k−1}, B_k]
+    with dense products, on random matrices with structural zeros (which it skips)."""
+    import casadi as ca
+
+    from hystmpc.mpc.multiple_shooting import condensing_function
+    rng = np.random.default_rng(3)
+    N, nx = 6, 4
+    pattern = rng.random((nx, nx)) < 0.6
+    A_sparsity = ca.DM(pattern.astype(float)).sparsity()
+    B_sparsity, C_sparsity = ca.Sparsity.dense(nx, 1), ca.Sparsity.triplet(1, nx, [0, 0], [0, 2])
+    As = [np.where(pattern, rng.normal(size=(nx, nx)), 0.0) for _ in range(N)]
+    Bs = [rng.normal(size=(nx, 1)) for _ in range(N)]
+    Cs = [np.array([[rng.normal(), 0.0, rng.normal(), 0.0]]) for _ in range(N)]
+    e = rng.normal(size=N)
+    J, S = np.zeros((N, N)), None
+    for k in range(N):
+        S = Bs[k] if S is None else np.hstack((As[k] @ S, Bs[k]))
+        J[k, : k + 1] = (Cs[k] @ S).ravel()
+    condense = condensing_function(A_sparsity, B_sparsity, C_sparsity, N)
+    inputs = []
+    for A, B, C in zip(As, Bs, Cs, strict=True):
+        inputs += [ca.project(ca.DM(A), A_sparsity), ca.DM(B), ca.project(ca.DM(C), C_sparsity)]
+    JtJ, Jte = condense(*inputs, e)
+    assert np.asarray(JtJ) == pytest.approx(J.T @ J, rel=1e-12, abs=1e-12)
+    assert np.asarray(Jte).ravel() == pytest.approx(J.T @ e, rel=1e-12, abs=1e-12)
+    assert np.abs(J.T @ J).max() > 0.1
+
+
 def test_condensed_rti_plan_keeps_the_rate_bound_from_an_infeasible_guess():
     """A guess that jumps (an inverse model after a reference step) is made rate-feasible
     before the step, so the backtracking's shortened steps keep the rate bound too."""
