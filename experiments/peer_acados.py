@@ -25,7 +25,8 @@ The twin is fair by construction:
   solvers' code in a random order, each after a random padding, and runs it under an
   environment of random size (which moves the stack), so that no one lucky or unlucky layout
   decides the ratio; the ratio is read per launch, and its median and range are reported.
-  (acados' libraries and hystmpc's QP library stay where the loader puts them.)
+  (acados' shared libraries stay where the loader puts them; DAQP's archive is linked with
+  hystmpc's step.)
 """
 
 from __future__ import annotations
@@ -42,6 +43,8 @@ from tempfile import TemporaryDirectory
 
 import casadi as ca
 import numpy as np
+
+from hystmpc.mpc.rti import REGULARISATION
 
 ACADOS_VARIANTS = (("FULL_CONDENSING_QPOASES", None), ("FULL_CONDENSING_HPIPM", "BALANCE"),
                    ("FULL_CONDENSING_HPIPM", "SPEED_ABS"), ("PARTIAL_CONDENSING_HPIPM", "SPEED_ABS"))
@@ -93,6 +96,7 @@ def acados_rti_timing(acados_package, bench_name: str = "pam", variants=ACADOS_V
     from hystmpc.experiments.realtime import write_solver
     from hystmpc.mpc.codegen import RecordingStep
     from hystmpc.mpc.codegen.toolchain import COMPILE_FLAGS, library_flags
+    flags = [*COMPILE_FLAGS, "-std=c99"]  # both solvers' code alike; acados' headers need C99
 
     package = Path(acados_package).resolve()
     if not (package / "acados_template" / "acados_layout.json").is_file() or not (package / "install").is_dir():
@@ -116,7 +120,7 @@ def acados_rti_timing(acados_package, bench_name: str = "pam", variants=ACADOS_V
                    header=f"{N} {calls.shape[1] - N} {len(calls)}", comments="")
         _write_problems(problem, calls, work / "acados_inputs.txt")
         include, libraries = library_flags((ours / "rti_step.c").read_text())
-        ours_objects = _compile(ours, compiler, COMPILE_FLAGS, ["rti_step.c"], include)
+        ours_objects = _compile(ours, compiler, flags, ["rti_step.c"], include)
         generate = _acados_generator(package, work / "acados", stack)
         programs = {}
         for number, (qp, mode) in enumerate(variants, start=1):
@@ -124,7 +128,7 @@ def acados_rti_timing(acados_package, bench_name: str = "pam", variants=ACADOS_V
             folder = work / name
             generate(_twin_ocp(problem, qp, mode, name, folder), folder)
             programs[_variant_label(qp, mode)] = _twin_program(folder, name, package, ours, ours_objects, libraries,
-                                                               compiler, COMPILE_FLAGS)
+                                                               compiler, flags)
         launches_of = {label: [] for label in programs}
         outputs = {}
         for _ in range(launches):
@@ -145,7 +149,7 @@ def acados_rti_timing(acados_package, bench_name: str = "pam", variants=ACADOS_V
                      "first_input_difference_max": float(difference.max())})
     return {"bench": bench_name, "scenario": bench.default_scenario, "problems": len(calls), "launches": launches,
             "repeats": repeats, "block": BLOCK, "seed": seed, "ca_version": ca.__version__,
-            "compile_flags": list(COMPILE_FLAGS), "variants": rows}
+            "compile_flags": flags, "variants": rows}
 
 
 def _rti_bench(bench_name: str):
@@ -167,12 +171,61 @@ def _variant_label(qp: str, mode: str | None) -> str:
     return qp.lower().replace("_", " ") + (f" ({mode.lower().replace('_', ' ')})" if mode else "")
 
 
+def twin_least_squares(problem) -> dict | None:
+    """The twin's linear least-squares cost matrices, or None where it needs the nonlinear one.
+
+    Residuals per stage: ``Vx [x; u_last] + Vu u − yref`` = ``(y(x) − r, u − u_last, u −
+    target)``, weighted by ``W``; at the end ``Vx_e [x; u_last] − r`` weighted by ``W_e``.
+    Linear where ``y`` is ``C x`` (no offset, no disturbance), as on pam, compliant and
+    reluctance.
+
+    Parameters
+    ----------
+    problem : MultipleShootingProblem
+        The bench's condensed problem.
+
+    Returns
+    -------
+    dict or None
+        ``Vx``, ``Vu``, ``W``, ``Vx_e``, ``W_e`` (:func:`twin_weights`).
+    """
+    m = problem.model
+    nx, nd = m.nx, m.nd
+    x, d = ca.SX.sym("x", nx), ca.SX.sym("d", nd)
+    y = m.output(x, d)
+    at_zero = ca.substitute(y, x, ca.DM.zeros(nx))
+    if not (ca.is_linear(y, x) and not ca.depends_on(y, d) and at_zero.is_zero()):
+        return None
+    output_row = np.asarray(ca.DM(ca.jacobian(y, x))).reshape(1, nx)
+    return {"Vx": np.block([[output_row, np.zeros((1, 1))], [np.zeros((1, nx)), -np.ones((1, 1))],
+                            [np.zeros((1, nx + 1))]]),
+            "Vu": np.array([[0.0], [1.0], [1.0]]), "Vx_e": np.concatenate((output_row, np.zeros((1, 1))), axis=1),
+            **twin_weights(problem.settings)}
+
+
+def twin_weights(settings) -> dict:
+    """``W`` (stage: output, rate, input with hystmpc's regularisation) and ``W_e`` (the last output).
+
+    Parameters
+    ----------
+    settings : NmpcSettings
+        The NMPC's weights.
+
+    Returns
+    -------
+    dict
+        ``W`` (3 × 3) and ``W_e`` (1 × 1).
+    """
+    return {"W": np.diag([settings.q_output, settings.r_rate, settings.r_input + REGULARISATION]),
+            "W_e": np.array([[settings.q_output]])}
+
+
 def _twin_ocp(problem, qp: str, mode: str | None, name: str, folder: Path):
     """The acados OCP of ``problem``: the cost on the states, inputs regularised as hystmpc's.
 
     The residuals are ``(y(x_k), u_k − u_{k−1}, u_k)`` with the references ``(r_k, 0, target_k)``
-    per stage, ``y(x_N)`` at the end; linear least squares where ``y`` is linear in the state
-    and independent of the disturbance (acados then evaluates no cost function).
+    per stage, ``y(x_N)`` at the end: linear least squares where :func:`twin_least_squares`
+    gives them (acados then evaluates no cost function), nonlinear otherwise.
     """
     from acados_template import AcadosModel, AcadosOcp
     m, s = problem.model, problem.settings
@@ -187,18 +240,16 @@ def _twin_ocp(problem, qp: str, mode: str | None, name: str, folder: Path):
     ocp.model = model
     ocp.dims.N = N
     ocp.solver_options.tf = float(N)  # steps of 1: acados weighs stage costs by the step, not the terminal one
-    if ca.is_linear(y, x) and not ca.depends_on(y, d):
-        output_row = np.asarray(ca.DM(ca.jacobian(y, x))).reshape(1, nx)
+    linear = twin_least_squares(problem)
+    if linear is not None:
         ocp.cost.cost_type, ocp.cost.cost_type_e = "LINEAR_LS", "LINEAR_LS"
-        ocp.cost.Vx = np.block([[output_row, np.zeros((1, 1))], [np.zeros((1, nx)), -np.ones((1, 1))],
-                                [np.zeros((1, nx + 1))]])
-        ocp.cost.Vu = np.array([[0.0], [1.0], [1.0]])
-        ocp.cost.Vx_e = np.concatenate((output_row, np.zeros((1, 1))), axis=1)
+        ocp.cost.Vx, ocp.cost.Vu, ocp.cost.Vx_e = linear["Vx"], linear["Vu"], linear["Vx_e"]
     else:
         ocp.cost.cost_type, ocp.cost.cost_type_e = "NONLINEAR_LS", "NONLINEAR_LS"
         model.cost_y_expr, model.cost_y_expr_e = ca.vertcat(y, u - u_last, u), y
-    ocp.cost.W, ocp.cost.yref = np.diag([s.q_output, s.r_rate, s.r_input + _regularisation()]), np.zeros(3)
-    ocp.cost.W_e, ocp.cost.yref_e = np.array([[s.q_output]]), np.zeros(1)
+    weights = twin_weights(s)
+    ocp.cost.W, ocp.cost.yref = weights["W"], np.zeros(3)
+    ocp.cost.W_e, ocp.cost.yref_e = weights["W_e"], np.zeros(1)
     ocp.constraints.idxbu = np.array([0])
     ocp.constraints.lbu, ocp.constraints.ubu = np.array([problem.u_min]), np.array([problem.u_max])
     ocp.constraints.C = np.concatenate((np.zeros((1, nx)), [[-1.0]]), axis=1)
@@ -215,25 +266,23 @@ def _twin_ocp(problem, qp: str, mode: str | None, name: str, folder: Path):
     return ocp
 
 
-def _regularisation() -> float:
-    from hystmpc.mpc.rti import REGULARISATION
-    return REGULARISATION
-
-
 def _write_problems(problem, calls: np.ndarray, path: Path) -> None:
-    """The recorded calls as the replay program's problems (the layout is in acados_replay.c)."""
+    """The recorded calls as the replay program's problems (the layout is in templates/twin_replay.c)."""
     m, s = problem.model, problem.settings
     N, nx, nd = s.horizon, m.nx, m.nd
+    layout = problem.parameter_layout()
     rows = []
     for call in calls:
         w0, p = call[:N], call[N:]
-        x0, d, u_prev = p[:nx], p[nx:nx + nd], p[nx + nd]
-        refs, u_ff = p[nx + nd + 1: nx + nd + 1 + N], p[nx + nd + 1 + N:]
+        condition, u_prev = p[layout["condition"]], float(p[layout["u_prev"]][0])
+        x0, d = condition[:nx], condition[nx:]
+        refs, u_ff = p[layout["ref"]], p[layout["u_ff"]]
         lasts = np.concatenate(([u_prev], w0))
         states = np.column_stack((np.asarray(problem.rollout(w0, p)), lasts))
         # r_input (u - u_ff)² + ε (u - w0)² = (r_input + ε) (u - target)² + constant
-        target = (s.r_input * u_ff + _regularisation() * w0) / (s.r_input + _regularisation())
-        stage_refs = np.concatenate(([refs[0]], refs[:-1]))  # stage k tracks r_k at x_k; x_0 is fixed
+        target = (s.r_input * u_ff + REGULARISATION * w0) / (s.r_input + REGULARISATION)
+        # stage k >= 1 tracks refs[k - 1] at x_k, as hystmpc's step; stage 0's x_0 is fixed (a placeholder)
+        stage_refs = np.concatenate(([refs[0]], refs[:-1]))
         yref = np.column_stack((stage_refs, np.zeros(N), target))
         rows.append(np.concatenate((x0, [u_prev], states.ravel(), w0, np.tile(d, N + 1), yref.ravel(), refs[-1:])))
     header = f"{nx + 1} 1 {nd} 3 1 {N} {len(rows)}"
@@ -294,7 +343,7 @@ def _twin_program(folder: Path, name: str, package: Path, ours: Path, ours_objec
                f"-I{root / 'hpipm' / 'include'}", f"-I{root / 'qpOASES_e'}", "-DACADOS_WITH_QPOASES"]
     generated = sorted(str(p.relative_to(folder)) for p in folder.rglob("*.c")
                        if not p.name.startswith(("main_", "acados_sim_solver")) and p.name != "replay.c")
-    main, *theirs = _compile(folder, compiler, [*flags, "-std=c99"], ["replay.c", *generated], include)
+    main, *theirs = _compile(folder, compiler, flags, ["replay.c", *generated], include)
     lib = package / "install" / "lib"
     # RPATH, not RUNPATH: libacados finds libqpOASES_e there too
     rpath = ["-Wl,--disable-new-dtags", f"-Wl,-rpath,{lib}"]

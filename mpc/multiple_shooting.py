@@ -12,8 +12,9 @@ from hystmpc.mpc.settings import InputBounds, NmpcSettings, SolverSettings
 
 STRAIGHT_LINE_CONDENSING_LIMIT = 40_000
 """Most operations of the straight-line condensing (:func:`condensing_function`): beyond, the
-C and its compile grow too long (pam's 17,461 operations: 575 kB of C, 11 s to compile), and the
-sensitivities are propagated as matrix products."""
+C and its compile grow too long (pam's 17,461 operations: 575 kB of C, 11 s to compile; they grow
+as N² × the nonzeros of ``A`` for the propagation plus N³/6 for ``JᵀJ``), and the sensitivities
+are propagated as matrix products."""
 
 
 class MultipleShootingProblem(TrackingProblem):
@@ -157,12 +158,15 @@ class MultipleShootingProblem(TrackingProblem):
             errors.append(y - ref[k])
             jacobians.append((A, B, Cy))
         e = ca.vertcat(*errors)
-        block = self.solvers.rti.sensitivity_block
-        condense = None if block else condensing_function(*(step_linear.sparsity_out(i) for i in (2, 3, 4)), N)
+        sparsities = [step_linear.sparsity_out(i) for i in (2, 3, 4)]
+        # a rough count first (it overestimates): a far larger function is not worth building to count it
+        rough = N * N * sparsities[0].nnz() + N ** 3 / 3
+        straight = not self.solvers.rti.sensitivity_block and rough <= 3 * STRAIGHT_LINE_CONDENSING_LIMIT
+        condense = condensing_function(*sparsities, N) if straight else None
         if condense is not None and condense.n_instructions() <= STRAIGHT_LINE_CONDENSING_LIMIT:
             JtJ, Jte = condense(*(J for stage in jacobians for J in stage), e)
         else:
-            Jy = _propagated_sensitivities(jacobians, block)
+            Jy = _propagated_sensitivities(jacobians, self.solvers.rti.sensitivity_block)
             JtJ, Jte = Jy.T @ Jy, Jy.T @ e
         H = s.q_output * JtJ + H_const
         grad = grad + s.q_output * Jte
@@ -259,7 +263,9 @@ def condensing_function(A_sparsity: ca.Sparsity, B_sparsity: ca.Sparsity, C_spar
         rows.append(ca.horzcat(C @ S, ca.SX(1, N - S.size2())))
     e = ca.SX.sym("e", N)
     J = ca.vertcat(*rows)
-    return ca.Function("condense", [*inputs, e], [ca.tril2symm(ca.tril(J.T @ J)), J.T @ e])
+    names = [f"{name}_{k}" for k in range(N) for name in "ABC"]
+    return ca.Function("condense", [*inputs, e], [ca.tril2symm(ca.tril(J.T @ J)), J.T @ e], [*names, "e"],
+                       ["JtJ", "Jte"])
 
 
 def _propagated_sensitivities(jacobians, block: int) -> ca.MX:

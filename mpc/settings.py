@@ -258,8 +258,10 @@ class RtiSettings:
     qp_iterations: int = 30
     """Interior-point iterations of the ``ipm`` QP (fixed: real time); refused with ``daqp``."""
     sensitivity_block: int = 0
-    """Condensed multiple-shooting step: 0 keeps the sensitivity of each predicted state to the
-    inputs at its exact width (fastest); ``b > 0`` pads it with explicit zeros to a multiple of
+    """Condensed multiple-shooting step: 0 computes the sensitivities of the predicted states to
+    the inputs as straight-line code of the Jacobians' nonzeros (fastest; past a size limit,
+    matrix products of their exact widths: :func:`hystmpc.mpc.multiple_shooting.condensing_function`);
+    ``b > 0`` propagates them as matrix products padded with explicit zeros to a multiple of
     ``b`` columns (``b >= N``: dense), so generated code reuses its work memory from sample to
     sample (less RAM, more arithmetic on zeros; the same numbers to the last bit while the
     Jacobians are finite). ``codegen --target`` picks 7 for a microcontroller where none is set

@@ -22,7 +22,8 @@ static double* read_numbers(const char* path, int header_count, long* header, lo
   for (int i = 0; i < header_count; ++i)
     if (fscanf(in, "%ld", &header[i]) != 1) { fprintf(stderr, "bad header in %s\n", path); exit(2); }
   long n = header[header_count - 1] * per(header);
-  double* data = malloc(sizeof(double) * n);
+  double* data = malloc(sizeof(double) * (n > 0 ? n : 1));
+  if (!data) { fprintf(stderr, "out of memory reading %s\n", path); exit(1); }
   for (long i = 0; i < n; ++i)
     if (fscanf(in, "%lf", &data[i]) != 1) { fprintf(stderr, "bad data at %ld in %s\n", i, path); exit(2); }
   fclose(in);
@@ -47,12 +48,16 @@ int main(int argc, char** argv) {
   }
   int repeats = atoi(argv[5]), block = atoi(argv[6]);
   srand((unsigned)atoi(argv[7]));
-  long hh[3], ah[7];
-  double* ours_in = read_numbers(argv[1], 3, hh, hystmpc_per);
-  double* theirs_in = read_numbers(argv[2], 7, ah, acados_per);
-  long n_w = hh[0], n_p = hh[1], count = hh[2];
-  long nx = ah[0], nu = ah[1], np = ah[2], ny = ah[3], N = ah[5], per = acados_per(ah);
-  if (ah[6] != count || repeats < 1 || block < 1) { fprintf(stderr, "mismatched problems or arguments\n"); return 2; }
+  long ours_header[3], theirs_header[7];
+  double* ours_in = read_numbers(argv[1], 3, ours_header, hystmpc_per);
+  double* theirs_in = read_numbers(argv[2], 7, theirs_header, acados_per);
+  long n_w = ours_header[0], n_p = ours_header[1], count = ours_header[2];
+  long nx = theirs_header[0], nu = theirs_header[1], np = theirs_header[2], ny = theirs_header[3];
+  long N = theirs_header[5], per = acados_per(theirs_header);
+  if (theirs_header[6] != count || repeats < 1 || block < 1) {
+    fprintf(stderr, "mismatched problems or arguments\n");
+    return 2;
+  }
 
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
   rti_step_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
@@ -77,13 +82,17 @@ int main(int argc, char** argv) {
   double* ours_first = malloc(sizeof(double) * count);
   double* theirs_first = malloc(sizeof(double) * count * nu);
   int* status = malloc(sizeof(int) * count);
+  if (!arg || !res || !iw || !w || !w_next || !ours_us || !theirs_us || !ours_first || !theirs_first || !status) {
+    fprintf(stderr, "out of memory\n");
+    return 1;
+  }
   struct timespec t0, t1;
   for (int r = 0; r < repeats; ++r) {
     for (long start = 0; start < count; start += block) {
       long stop = start + block < count ? start + block : count;
-      int acados_first = rand() & 1;
-      for (int side = 0; side < 2; ++side) {
-        if (side == acados_first) {
+      int hystmpc_turn = rand() & 1; /* 0: hystmpc's step runs first on this block, 1: second */
+      for (int turn = 0; turn < 2; ++turn) {
+        if (turn == hystmpc_turn) {
           for (long k = start; k < stop; ++k) {
             arg[0] = ours_in + k * (n_w + n_p);
             arg[1] = ours_in + k * (n_w + n_p) + n_w;
@@ -122,9 +131,11 @@ int main(int argc, char** argv) {
     }
   }
   FILE* o = fopen(argv[3], "w");
+  if (!o) { fprintf(stderr, "cannot write %s\n", argv[3]); return 1; }
   for (long k = 0; k < count; ++k) fprintf(o, "%.17g %d %.17g\n", ours_first[k], status[k], theirs_first[k * nu]);
   fclose(o);
   FILE* t = fopen(argv[4], "w");
+  if (!t) { fprintf(stderr, "cannot write %s\n", argv[4]); return 1; }
   for (long i = 0; i < count * repeats; ++i) fprintf(t, "%.3f %.3f\n", ours_us[i], theirs_us[i]);
   fclose(t);
   rti_step_release(mem);
