@@ -633,7 +633,7 @@ class ActuatorSpec:
         initial = [(10 * noise) ** 2] * n_block + [1e-12 * noise**2] * model.dynamics.delay_samples + \
             [(1000 * noise) ** 2]
         return InverseLinearMpc(
-            linear, InverseCompensation(hysteresis, sensors=lambda m, comp: [m.y],
+            linear, InverseCompensation(hysteresis, sensors=("y",),
                                         rest_input=float(np.clip(0.0, *self.input_bounds))),  # the plant's
             InputBounds(*self.input_bounds, self.input_rate), settings or config["lmpc"], process_noise=process,
             measurement_noise=[noise**2], initial_state=lambda z: np.concatenate(

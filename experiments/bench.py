@@ -10,7 +10,7 @@ gets only those, so a key a bench accepts is one something uses.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -20,6 +20,7 @@ from hystmpc.experiments.own_plant import check_plant, describe_plant
 from hystmpc.experiments.report import version
 from hystmpc.experiments.runner import Controller, InputGuard, Labels, RunResult, Scenario, simulate
 from hystmpc.mpc.codegen import Signals
+from hystmpc.mpc.linear_mpc import LinearMpcSettings
 from hystmpc.mpc.runtime import CodeLabels, assemble_nmpc, validate_nmpc
 from hystmpc.mpc.settings import GaussNewtonSettings, NmpcSettings
 
@@ -90,6 +91,10 @@ class Bench:
     untuned_defaults: Callable[[], dict[str, Any]] | None = None
     """:attr:`defaults` before the baselines' gains are tuned (an actuator file: seconds to
     minutes saved where no baseline runs, and where the settings are only checked)."""
+    generated: Callable[[dict[str, Any]], dict[str, Any]] | None = None
+    """``config -> config``: what the generated controller needs changed, where the bench needs
+    something (dea: a creep window of 200 samples for the full memory, which a fixed C memory
+    cannot hold); see :meth:`generated_config`."""
 
     @property
     def guard(self) -> InputGuard:
@@ -177,14 +182,35 @@ class Bench:
         config = self.configure() if config is None else config
         return tuple(self.build_plant(config).reset(0).sensors)
 
+    def generated_config(self, config: dict[str, Any]) -> dict[str, Any]:
+        """``config`` as the generated controller is built from it.
+
+        Every linear MPC solves with the generated interior-point QP (``lmpc.qp=ipm``: the
+        planner of ``nmpc.inverse_plan=linear-mpc`` is generated with it), then the bench's
+        :attr:`generated` applies. The NMPC settings are left as they are.
+
+        Parameters
+        ----------
+        config : dict
+            The configuration.
+
+        Returns
+        -------
+        dict
+            A new configuration.
+        """
+        out = {key: replace(value, qp="ipm") if isinstance(value, LinearMpcSettings) else value
+               for key, value in config.items()}
+        return self.generated(out) if self.generated is not None else out
+
     def build_controller(self, name: str, config: dict[str, Any]) -> Controller:
         """Controller ``name`` built from ``config``.
 
         A controller that reads NMPC settings (a group holding
         :class:`~hystmpc.mpc.settings.NmpcSettings`) runs where they say
-        (``nmpc.runtime``) and takes its inverse-model inputs from where they say
-        (``nmpc.inverse_plan``: its spec's :attr:`ControllerSpec.planner`):
-        :func:`hystmpc.mpc.runtime.assemble_nmpc`.
+        (``nmpc.runtime``; generated from :meth:`generated_config`) and takes its inverse-model
+        inputs from where they say (``nmpc.inverse_plan``: its spec's
+        :attr:`ControllerSpec.planner`): :func:`hystmpc.mpc.runtime.assemble_nmpc`.
 
         Parameters
         ----------
@@ -214,8 +240,15 @@ class Bench:
         labels = self.labels
         code_labels = CodeLabels(Signals(labels.output_name, labels.units, labels.input_units,
                                          tuple(labels.sensor_units)), self.sample_period, self.name, version())
-        return assemble_nmpc(lambda settings: spec.build({**groups, group: settings}), groups[group], code_labels,
-                             planner=lambda: self._planner(spec, config, groups[group]))
+        generated = self.generated_config(config)
+        generated_groups = self._groups(generated, spec.groups, f"controller {name!r}")
+
+        def build(settings: NmpcSettings, for_code: bool = False) -> Controller:
+            return spec.build({**(generated_groups if for_code else groups), group: settings})
+
+        def planner(for_code: bool = False) -> Controller:
+            return self._planner(spec, generated if for_code else config, groups[group])
+        return assemble_nmpc(build, groups[group], code_labels, planner=planner)
 
     def _spec(self, name: str) -> ControllerSpec:
         if name not in self.controllers:

@@ -29,10 +29,11 @@ if TYPE_CHECKING:  # the bench builds its NMPC through this module (nmpc.runtime
 
 
 def controller_config(bench: Bench, config: dict) -> dict:
-    """``config`` with ``nmpc.solver=rti`` and the controller run in Python.
+    """``config`` as the generated controller is built from it, with ``nmpc.solver=rti`` run in Python.
 
     The generated controller embeds the RTI step, and the controller run in Python is the one
-    generated.
+    generated (:meth:`Bench.generated_config <hystmpc.experiments.bench.Bench.generated_config>`:
+    the linear MPC planner's QP, and what the bench needs).
 
     Parameters
     ----------
@@ -48,7 +49,7 @@ def controller_config(bench: Bench, config: dict) -> dict:
     """
     if "nmpc" not in config:
         raise ValueError(f"bench {bench.name!r} has no nmpc settings")
-    return {**config, "nmpc": generated_settings(config["nmpc"])}
+    return {**bench.generated_config(config), "nmpc": generated_settings(config["nmpc"])}
 
 
 MICROCONTROLLER_SENSITIVITY_BLOCK = 7

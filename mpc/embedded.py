@@ -22,7 +22,6 @@ bench writes them so). What cannot be generated raises :class:`NotGeneratable`, 
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass
 
 import casadi as ca
@@ -30,13 +29,11 @@ import numpy as np
 
 from hystmpc.models.fractional import window_functions
 from hystmpc.mpc.codegen.controller import ControllerCode
+from hystmpc.mpc.embedded_planner import PlannerExpressions
+from hystmpc.mpc.expressions import NotGeneratable, all_finite, clip, is_nan, rows, symbolic
 from hystmpc.mpc.observer import Estimate, MemoryObserver, StateObserver
 from hystmpc.mpc.rti import QP_TOLERANCE
 from hystmpc.mpc.settings import second_start_cost
-
-
-class NotGeneratable(ValueError):
-    """The controller has a part without a CasADi form yet (the message says which)."""
 
 
 @dataclass(frozen=True)
@@ -117,29 +114,6 @@ class MemoryLayout:
                             for name, sl in self.slices.items()])
 
 
-def _rows(v, start: int, stop: int) -> ca.MX:
-    """``v[start:stop]`` as a column.
-
-    Also for a 1x1 ``v`` and an empty range (where CasADi's slicing gives a 1x0 row that will
-    not stack).
-    """
-    return ca.vertcat(*[v[i] for i in range(start, stop)]) if stop > start else ca.MX(0, 1)
-
-
-def _finite(v) -> ca.MX:
-    """1 when every entry of ``v`` is finite (NaN and ±inf give 0)."""
-    return ca.sum1(ca.fabs(ca.vec(v))) < ca.inf
-
-
-def _is_nan(x) -> ca.MX:
-    """1 where ``x`` is NaN: it fails every comparison (``x != x`` is simplified away)."""
-    return ca.logic_not(ca.logic_or(x <= 0, x > 0))
-
-
-def _clip(v, lower, upper):
-    return ca.fmin(ca.fmax(v, lower), upper)
-
-
 def feasible_guess_expr(u, u_prev, u_min: float, u_max: float, du_max: float) -> ca.MX:
     """:func:`hystmpc.mpc.rti.feasible_guess` on CasADi expressions (the same operations).
 
@@ -159,10 +133,10 @@ def feasible_guess_expr(u, u_prev, u_min: float, u_max: float, du_max: float) ->
     casadi.MX
         The feasible inputs.
     """
-    u = _clip(u, u_min, u_max)
+    u = clip(u, u_min, u_max)
     if not np.isfinite(du_max):
         return u
-    last = _clip(u_prev, u_min, u_max)
+    last = clip(u_prev, u_min, u_max)
     out = []
     for k in range(u.shape[0]):
         last = ca.fmin(ca.fmin(ca.fmax(ca.fmax(u[k], last - du_max), u_min), last + du_max), u_max)
@@ -185,24 +159,24 @@ class _StateEstimator:
         ekf, nx = self.ekf, self.model.nx
         n = nx + self.model.nd
         xd, P = ekf.time_update(part("x"), u_last, part("d"), ca.reshape(part("P"), n, n), ca.DM(ekf.Q))
-        return {"x": _rows(xd, 0, nx), "d": _rows(xd, nx, n), "P": P}
+        return {"x": rows(xd, 0, nx), "d": rows(xd, nx, n), "P": P}
 
     def feedback(self, part, z, started):
         """``(parts, estimate, condition, lost, predicted)`` after the measurement ``z``."""
         ekf, model = self.ekf, self.model
         nx, nd = model.nx, model.nd
         n = nx + nd
-        x0 = _symbolic(self.observer.initial_state, "the observer's initial_state", z, nx)
+        x0 = symbolic(self.observer.initial_state, "the observer's initial_state", z, nx)
         x_rest = ca.vertcat(x0, ca.DM.zeros(nd))
         P_rest = ca.DM(np.diag(self.observer.initial_covariance))
         xd = ca.if_else(started, ca.vertcat(part("x"), part("d")), x_rest)
         P = ca.if_else(started, ca.reshape(part("P"), n, n), P_rest)
-        predicted = model.output(_rows(xd, 0, nx), _rows(xd, nx, n))
-        xd_update, P_update = ekf.measurement_update(_rows(xd, 0, nx), _rows(xd, nx, n), P, z, ca.DM(ekf.R))
-        lost = ca.logic_not(_finite(xd_update))
+        predicted = model.output(rows(xd, 0, nx), rows(xd, nx, n))
+        xd_update, P_update = ekf.measurement_update(rows(xd, 0, nx), rows(xd, nx, n), P, z, ca.DM(ekf.R))
+        lost = ca.logic_not(all_finite(xd_update))
         xd = ca.if_else(lost, x_rest, xd_update)
         P = ca.if_else(lost, P_rest, P_update)
-        x, d = _rows(xd, 0, nx), _rows(xd, nx, n)
+        x, d = rows(xd, 0, nx), rows(xd, nx, n)
         return {"x": x, "d": d, "P": P}, Estimate(x, d), ca.vertcat(x, d), lost, predicted
 
 
@@ -242,14 +216,14 @@ class _MemoryEstimator:
         """The whole-model EKF's state with its exact part set to the exact memory."""
         if self.observer.split:
             return x_e
-        return ca.vertcat(_rows(x_e, 0, self.memory.n_dynamic), hysteresis, queue)
+        return ca.vertcat(rows(x_e, 0, self.memory.n_dynamic), hysteresis, queue)
 
     def prepare(self, part, u_last) -> dict:
         """The exact memory moved by the input sent last, and the EKF's time update."""
         queue = part("queue")
         D = self.memory.delay_samples
         u_in = queue[0] if D else u_last
-        queue_next = ca.vertcat(_rows(queue, 1, D), u_last) if D else queue
+        queue_next = ca.vertcat(rows(queue, 1, D), u_last) if D else queue
         try:
             hysteresis, h = self.memory.hysteresis.step(part("hysteresis"), u_in)
         except Exception as exc:  # noqa: BLE001 - a NumPy-only step fails in many ways
@@ -263,7 +237,7 @@ class _MemoryEstimator:
             n = n_e + self.model.nd
             xd, P = ekf.time_update(part("x"), h if self.observer.split else u_last, part("d"),
                                     ca.reshape(part("P"), n, n), ca.DM(ekf.Q))
-            out.update({"x": self._held(_rows(xd, 0, n_e), hysteresis, queue_next), "d": _rows(xd, n_e, n), "P": P})
+            out.update({"x": self._held(rows(xd, 0, n_e), hysteresis, queue_next), "d": rows(xd, n_e, n), "P": P})
         return out
 
     def feedback(self, part, z, started):
@@ -277,24 +251,24 @@ class _MemoryEstimator:
             return {}, Estimate(x, d, hysteresis, None, queue), ca.vertcat(x, d), ca.MX(0), model.output(x, d)
         ekf, n_e = self.ekf, self.ekf.model.nx
         n = n_e + nd
-        x0 = _symbolic(obs.initial_state, "the observer's initial_state", z, n_dyn)
+        x0 = symbolic(obs.initial_state, "the observer's initial_state", z, n_dyn)
         x_rest = ca.vertcat(self._held(ca.vertcat(x0, ca.DM.zeros(n_e - n_dyn)), hysteresis, queue), ca.DM.zeros(nd))
         P_rest = ca.DM(np.diag(obs.initial_covariance))
         xd = ca.if_else(started, ca.vertcat(part("x"), part("d")), x_rest)
         P = ca.if_else(started, ca.reshape(part("P"), n, n), P_rest)
         output = self.memory.dynamics.output if obs.split else model.output
-        predicted = output(_rows(xd, 0, n_e), _rows(xd, n_e, n))
-        xd_update, P_update = ekf.measurement_update(_rows(xd, 0, n_e), _rows(xd, n_e, n), P, z, ca.DM(ekf.R))
-        xd_update = ca.vertcat(self._held(_rows(xd_update, 0, n_e), hysteresis, queue), _rows(xd_update, n_e, n))
-        lost = ca.logic_not(_finite(xd_update))
+        predicted = output(rows(xd, 0, n_e), rows(xd, n_e, n))
+        xd_update, P_update = ekf.measurement_update(rows(xd, 0, n_e), rows(xd, n_e, n), P, z, ca.DM(ekf.R))
+        xd_update = ca.vertcat(self._held(rows(xd_update, 0, n_e), hysteresis, queue), rows(xd_update, n_e, n))
+        lost = ca.logic_not(all_finite(xd_update))
         xd = ca.if_else(lost, x_rest, xd_update)
         P = ca.if_else(lost, P_rest, P_update)
-        x_e, d = _rows(xd, 0, n_e), _rows(xd, n_e, n)
+        x_e, d = rows(xd, 0, n_e), rows(xd, n_e, n)
         if self.creep is not None:  # the creep model's condition: [hysteresis, x_dyn, d, history]
             history = self.creep[1](part("creep"))
             return ({"x": x_e, "d": d, "P": P}, Estimate(x_e, d, hysteresis, history, queue),
                     ca.vertcat(hysteresis, x_e, d, history), lost, predicted)
-        x = ca.vertcat(_rows(x_e, 0, n_dyn), hysteresis, queue)
+        x = ca.vertcat(rows(x_e, 0, n_dyn), hysteresis, queue)
         return ({"x": x_e, "d": d, "P": P}, Estimate(x, d, hysteresis, None, queue), ca.vertcat(x, d), lost,
                 predicted)
 
@@ -310,10 +284,9 @@ def _estimator(controller):
 
 
 def _check(controller) -> None:
-    if controller.settings.inverse_plan != "static":
-        raise NotGeneratable("a generated controller takes its inverse-model inputs from the static inverse; "
-                             f"nmpc.inverse_plan={controller.settings.inverse_plan} (a linear MPC's plan) has no "
-                             "generated form yet: set nmpc.inverse_plan=static")
+    if controller.settings.inverse_plan == "linear-mpc" and controller.planner is None:
+        raise NotGeneratable("nmpc.inverse_plan=linear-mpc takes its inputs from a linear MPC's plan, and this "
+                             "controller has none (give it planner=InverseLinearMpc(...))")
     problem = controller.problem
     if getattr(problem, "multiple_shooting", False) and not getattr(problem, "condensed", False):
         raise NotGeneratable("a generated controller needs the condensed RTI step "
@@ -353,7 +326,11 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     _check(controller)
     problem, s, bounds = controller.problem, controller.settings, controller.bounds
     N = controller.horizon
-    layout = MemoryLayout(estimator.parts, N, estimator.initial_values)
+    planner = None
+    if s.inverse_plan == "linear-mpc":
+        planner = PlannerExpressions(controller.planner, controller.sensor_names)
+    layout = MemoryLayout(estimator.parts + (planner.parts if planner else ()), N,
+                          estimator.initial_values + (planner.initial_values if planner else ()))
     sl = layout.slices
     mem = ca.MX.sym("mem", layout.size)
 
@@ -365,6 +342,8 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
 
     # prepare: what the input just sent moves (the EKF's time update, the exact memory)
     moved = estimator.prepare(part, u_last)
+    if planner is not None:
+        moved.update(planner.prepare(part, u_last))
     prepare = ca.Function(f"{name}_prepare", [mem], [layout.pack(
         mem, **{key: ca.if_else(started, ca.vec(value), part(key)) for key, value in moved.items()})], ["mem"],
         ["mem_next"])
@@ -376,7 +355,11 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
 
     refs = window[1:] if s.preview else ca.repmat(window[0], N, 1)
     u_min, u_max, rate = float(bounds.lower), float(bounds.upper), float(bounds.rate)
-    inverse_plan = None if controller.inverse is None else _inverse_plan(controller, est, refs, u_last, N)
+    if planner is not None:  # the linear MPC's plan every sample (its filter and plan follow the loop)
+        planned, inverse_plan = planner.feedback(part, z, started, refs, u_last)
+        estimated.update(planned)
+    else:
+        inverse_plan = None if controller.inverse is None else _inverse_plan(controller, est, refs, u_last, N)
     jump = ca.MX(0)
     if np.isfinite(controller.jump_threshold):
         jump = ca.logic_and(part("has_ref_end") > 0.5, ca.fabs(refs[-1] - part("ref_end")) > controller.jump_threshold)
@@ -443,8 +426,8 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
         fallback = again[0] if held is None else ca.if_else(at_hand, held[0], again[0])
     u = ca.if_else(falls_back, fallback, planned)
     if np.isfinite(rate):
-        u = _clip(u, u_last - rate, u_last + rate)
-    u = _clip(u, u_min, u_max)
+        u = clip(u, u_last - rate, u_last + rate)
+    u = clip(u, u_min, u_max)
     status = ca.if_else(lost, 2, ca.if_else(success, 0, 1))
     mem_next = layout.pack(
         mem, **estimated, u_last=u, started=1, plan=ca.if_else(success, w, plan), has_plan=success,
@@ -558,8 +541,8 @@ def rti_steps_expr(rti: ca.Function, w, p, iterations: int, extra_step_tolerance
         """The iterate after ``step``, counted only where ``taken`` (when given)."""
         nonlocal worst, broken, moved
         w_next, qp_error = step
-        new_worst = ca.if_else(ca.logic_or(qp_error <= worst, _is_nan(worst)), worst, qp_error)
-        finite = _finite(w_next)
+        new_worst = ca.if_else(ca.logic_or(qp_error <= worst, is_nan(worst)), worst, qp_error)
+        finite = all_finite(w_next)
         new_broken = ca.logic_or(broken, ca.logic_not(finite))
         if taken is not None:
             new_worst, new_broken = ca.if_else(taken, new_worst, worst), ca.if_else(taken, new_broken, broken)
@@ -620,34 +603,13 @@ def _inverse_plan(controller, est: Estimate, refs, u_last, N: int):
         what = f"{type(model).__name__}.inverse_step"
         advice = ("this model has no symbolic inverse yet, so its whole controller is not generated (from Python, "
                   "one with nmpc.warm_start=shift and its inverse set to None can be)")
-    raw = _symbolic(lambda r: controller.inverse(Estimate(**symbols), r), what, refs_s, N, advice)
+    raw = symbolic(lambda r: controller.inverse(Estimate(**symbols), r), what, refs_s, N, advice)
     bounds = controller.bounds
-    plan = _clip(ca.if_else(ca.fabs(raw) < ca.inf, raw, u_last_s), float(bounds.lower), float(bounds.upper))
+    plan = clip(ca.if_else(ca.fabs(raw) < ca.inf, raw, u_last_s), float(bounds.lower), float(bounds.upper))
     inputs = [*symbols.values(), refs_s, u_last_s]
     switch = ca.Function.if_else("inverse_plan_if_needed", ca.Function("inverse_plan", inputs, [plan]),
                                  ca.Function("no_inverse_plan", inputs, [ca.DM.zeros(N)]))
     return lambda needed: switch(needed, *fields.values(), refs, u_last)
-
-
-def _symbolic(fun, what: str, arg, size: int,
-              advice: str = "write it with casadi operations for a generated controller"):
-    """``fun(arg)`` on a CasADi symbol as a column of ``size`` entries.
-
-    Raises :class:`NotGeneratable` saying ``what`` has no CasADi form (then ``advice``) or gives
-    the wrong length.
-    """
-    try:
-        with warnings.catch_warnings():  # a NumPy-only function on a CasADi symbol warns before it fails
-            warnings.simplefilter("ignore")
-            out = fun(arg)
-        if not isinstance(out, (ca.MX, ca.SX, ca.DM)):
-            raise TypeError(f"returned {type(out).__name__}")
-    except Exception as exc:  # noqa: BLE001 - any failure means the same thing here
-        raise NotGeneratable(f"{what} does not accept CasADi expressions ({type(exc).__name__}: {exc}); "
-                             f"{advice}") from None
-    if out.numel() != size:
-        raise NotGeneratable(f"{what} gives {out.numel()} values on CasADi expressions, {size} expected")
-    return ca.vec(out)
 
 
 class FunctionController:

@@ -5,7 +5,9 @@ A :class:`Compensation` (an actuator's inverse hysteresis model) turns a *virtua
 nearly linear. :class:`InverseLinearMpc` controls that remainder with a linear MPC: a
 condensed QP over the same horizon, input and rate bounds and reference preview as the
 NMPC, solved by OSQP, and a Kalman filter with the same integrating disturbance as the
-NMPC's estimator (offset-free tracking). The remainder is given as a
+NMPC's estimator (offset-free tracking); ``lmpc.qp=ipm`` solves the QP with the generated
+controller's interior-point method instead (:func:`hystmpc.mpc.qp.interior_point_qp`). The
+remainder is given as a
 :class:`~hystmpc.models.prediction.PredictionModel` with ``v`` as its input; it is
 linearised once at the origin (exact when it is linear).
 """
@@ -20,7 +22,12 @@ import casadi as ca
 import numpy as np
 
 from hystmpc.models.prediction import PredictionModel
+from hystmpc.mpc.qp import SMALLEST_WIDTH
+from hystmpc.mpc.rti import QP_TOLERANCE
 from hystmpc.mpc.settings import InputBounds
+
+LINEAR_MPC_QPS = ("osqp", "ipm")
+"""The linear MPC's QP solvers (``lmpc.qp``)."""
 
 
 class Compensation(Protocol):
@@ -117,6 +124,9 @@ class LinearMpcSettings:
     """Weight on the squared tracking error of each predicted output."""
     r_rate: float = 0.3
     """Weight on the squared change of the virtual input per sample."""
+    qp: str = "osqp"
+    """QP solver: ``osqp``, or ``ipm``, the interior-point QP the generated controller runs
+    (a generated NMPC's planner uses it; ``codegen`` sets it)."""
 
     def __post_init__(self):
         if self.horizon < 2:
@@ -125,6 +135,8 @@ class LinearMpcSettings:
             raise ValueError(f"q_output must be finite and > 0, got {self.q_output}")
         if not (np.isfinite(self.r_rate) and self.r_rate >= 0):
             raise ValueError(f"r_rate must be finite and >= 0, got {self.r_rate}")
+        if self.qp not in LINEAR_MPC_QPS:
+            raise ValueError(f"qp {self.qp!r} is unknown; allowed: {', '.join(LINEAR_MPC_QPS)}")
 
 
 def linearise(model: PredictionModel) -> dict[str, np.ndarray]:
@@ -174,14 +186,100 @@ def one_sample_delay(sample_period: float) -> PredictionModel:
         sample_period=sample_period, state_names=("output",), sensor_names=())
 
 
+@dataclass(frozen=True)
+class CondensedLinearMpc:
+    """The linear MPC's Kalman filter on ``[x; d]`` and its QP condensed onto the virtual inputs.
+
+    Filter: ``s+ = A s + B v + f``, sensors ``z = C s + z0``, output ``y = Cy s + y0``.
+    Prediction over the horizon: ``y_{k+1..k+N} = Phi s + G v + offset``. QP:
+    ``min ½ vᵀ hessian v + gᵀ v`` with ``g = 2 (q Gᵀ(Phi s + offset − r) − r_rate Dᵀ e0)``,
+    ``e0 = [v_prev, 0, …]``, bounds on ``v`` and on ``D v`` (the changes).
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    f: np.ndarray
+    C: np.ndarray
+    z0: np.ndarray
+    Q: np.ndarray
+    R: np.ndarray
+    Cy: np.ndarray
+    y0: float
+    Phi: np.ndarray
+    G: np.ndarray
+    offset: np.ndarray
+    D: np.ndarray
+    hessian: np.ndarray
+    initial_covariance: np.ndarray
+
+
+def condense(model: PredictionModel, settings: LinearMpcSettings, process_noise, measurement_noise,
+             initial_covariance) -> CondensedLinearMpc:
+    """The Kalman filter and the condensed QP of a linear MPC on ``model`` (linearised at the origin).
+
+    Parameters
+    ----------
+    model : PredictionModel
+        The linear remainder, input ``v``.
+    settings : LinearMpcSettings
+        Horizon and weights.
+    process_noise, measurement_noise, initial_covariance : array_like
+        Diagonals of the filter's covariances (``[x; d]``, sensors, ``[x; d]`` at the start).
+
+    Returns
+    -------
+    CondensedLinearMpc
+        The matrices.
+    """
+    nx, nd, N = model.nx, model.nd, settings.horizon
+    for name, values, length in (("process_noise", process_noise, nx + nd),
+                                 ("measurement_noise", measurement_noise, model.nz),
+                                 ("initial_covariance", initial_covariance, nx + nd)):
+        if np.size(values) != length:
+            raise ValueError(f"{name} needs {length} entries, got {np.size(values)}")
+    lin = linearise(model)
+    A = np.block([[lin["A"], lin["Bd"]], [np.zeros((nd, nx)), np.eye(nd)]])
+    B = np.vstack((lin["B"], np.zeros((nd, 1)))).ravel()
+    f = np.concatenate((lin["f0"], np.zeros(nd)))
+    Cy = np.hstack((lin["Cy"], lin["Dy"])).ravel()
+    # y_{k+j} = Cy (A^j z + Σ_{i<j} A^{j−1−i} (B v_i + f)) + y0, j = 1..N
+    Phi, G, offset = np.empty((N, nx + nd)), np.zeros((N, N)), np.empty(N)
+    power = np.eye(nx + nd)
+    drift = np.zeros(nx + nd)
+    markov = []
+    for j in range(N):
+        markov.append(Cy @ power @ B)
+        drift = A @ drift + f
+        power = A @ power
+        Phi[j] = Cy @ power
+        offset[j] = Cy @ drift + lin["y0"][0]
+    for j in range(N):
+        G[j, : j + 1] = markov[j::-1]
+    D = np.eye(N) - np.eye(N, k=-1)  # Δv_j = v_j − v_{j−1}
+    hessian = 2 * (settings.q_output * G.T @ G + settings.r_rate * D.T @ D)
+    # the filter on [x; d] (d+ = d): the NMPC's disturbance model, exact on a linear model
+    return CondensedLinearMpc(
+        A=A, B=B, f=f, C=np.hstack((lin["Cz"], lin["Dz"])).reshape(model.nz, nx + nd), z0=lin["z0"],
+        Q=np.diag(np.asarray(process_noise, float)),
+        R=np.diag(np.asarray(measurement_noise, float)).reshape(model.nz, model.nz), Cy=Cy, y0=float(lin["y0"][0]),
+        Phi=Phi, G=G, offset=offset, D=D, hessian=hessian,
+        initial_covariance=np.diag(np.asarray(initial_covariance, float)))
+
+
 class InverseLinearMpc:
-    """Inverse compensation + offset-free linear MPC (OSQP, condensed onto the virtual inputs).
+    """Inverse compensation + offset-free linear MPC (condensed onto the virtual inputs).
 
     Each sample: the compensation sees the measurement; the Kalman filter's time update
     with the last virtual input and its measurement update; the virtual bounds (the
     actuator's bounds and rate, through the compensation, held over the horizon); the QP
     over ``v_0..v_{N−1}``; ``u = to_input(v_0)``, kept inside the bounds. A failed QP is
     counted, and the previous plan's next virtual input is used (or the last one held).
+
+    The QP is OSQP's, or with ``settings.qp='ipm'`` the generated interior-point method's.
+    With ``ipm`` and a compensation that has a CasADi form, the filter, the QP and the
+    compensation's memory run as :attr:`functions`
+    (:class:`~hystmpc.mpc.embedded_planner.PlannerFunctions`, compiled where it can be):
+    the Functions a generated NMPC embeds, so that it repeats this planner to the last bit.
 
     Parameters
     ----------
@@ -211,49 +309,25 @@ class InverseLinearMpc:
             raise ValueError(f"the linear MPC takes one virtual input, the model has {model.nu}")
         self.model, self.compensation, self.bounds, self.settings = model, compensation, bounds, settings
         self.sensor_names = model.sensor_names
-        nx, nd, N = model.nx, model.nd, settings.horizon
-        for name, values, length in (("process_noise", process_noise, nx + nd),
-                                     ("measurement_noise", measurement_noise, model.nz),
-                                     ("initial_covariance", initial_covariance, nx + nd)):
-            if np.size(values) != length:
-                raise ValueError(f"{name} needs {length} entries, got {np.size(values)}")
-        self._initial_state, self._p0 = initial_state, np.diag(np.asarray(initial_covariance, float))
-        lin = linearise(model)
-        A = np.block([[lin["A"], lin["Bd"]], [np.zeros((nd, nx)), np.eye(nd)]])
-        B = np.vstack((lin["B"], np.zeros((nd, 1)))).ravel()
-        f = np.concatenate((lin["f0"], np.zeros(nd)))
-        Cy = np.hstack((lin["Cy"], lin["Dy"])).ravel()
-        # Kalman filter on [x; d] (d+ = d): the NMPC's disturbance model, exact on a linear model
-        self._kalman = {"A": A, "B": B, "f": f, "C": np.hstack((lin["Cz"], lin["Dz"])).reshape(model.nz, nx + nd),
-                        "z0": lin["z0"], "Q": np.diag(np.asarray(process_noise, float)),
-                        "R": np.diag(np.asarray(measurement_noise, float)).reshape(model.nz, model.nz),
-                        "Cy": Cy, "y0": float(lin["y0"][0])}
-        # y_{k+j} = Cy (A^j z + Σ_{i<j} A^{j−1−i} (B v_i + f)) + y0, j = 1..N
-        self._Phi = np.empty((N, nx + nd))
-        self._G = np.zeros((N, N))
-        self._offset = np.empty(N)
-        power = np.eye(nx + nd)
-        drift = np.zeros(nx + nd)
-        markov = []
-        for j in range(N):
-            markov.append(Cy @ power @ B)
-            drift = A @ drift + f
-            power = A @ power
-            self._Phi[j] = Cy @ power
-            self._offset[j] = Cy @ drift + lin["y0"][0]
-        for j in range(N):
-            self._G[j, : j + 1] = markov[j::-1]
-        self._D = np.eye(N) - np.eye(N, k=-1)  # Δv_j = v_j − v_{j−1}
-        q, r = settings.q_output, settings.r_rate
-        P = 2 * (q * self._G.T @ self._G + r * self._D.T @ self._D)
-        self._qp = osqp.OSQP()
+        N = settings.horizon
+        self.initial_state = initial_state
+        self.matrices = condense(model, settings, process_noise, measurement_noise, initial_covariance)
+        P = self.matrices.hessian
         try:
             if not np.all(np.isfinite(P)):
                 raise ValueError("its Hessian is not finite")
-            self._qp.setup(P=sparse.csc_matrix(np.triu(P)), q=np.zeros(N),
-                           A=sparse.csc_matrix(np.vstack((np.eye(N), self._D))), l=np.full(2 * N, -1e30),
-                           u=np.full(2 * N, 1e30), verbose=False, warm_starting=True, eps_abs=1e-7, eps_rel=1e-7,
-                           max_iter=10000, polishing=False)
+            self.functions = None
+            if settings.qp == "ipm":
+                from hystmpc.mpc.qp import interior_point_qp
+                self._rows = ca.sparsify(ca.DM(self.qp_rows()))
+                self._ipm = interior_point_qp(ca.Sparsity.dense(N, N), self._rows.sparsity())
+                self.functions, self._compiled = _compiled_planner(self)
+            else:
+                self._qp = osqp.OSQP()
+                self._qp.setup(P=sparse.csc_matrix(np.triu(P)), q=np.zeros(N),
+                               A=sparse.csc_matrix(np.vstack((np.eye(N), self.matrices.D))),
+                               l=np.full(2 * N, -1e30), u=np.full(2 * N, 1e30), verbose=False, warm_starting=True,
+                               eps_abs=1e-7, eps_rel=1e-7, max_iter=10000, polishing=False)
         except (ValueError, osqp.OSQPException) as exc:  # an unstable model's prediction over N samples explodes
             reason = exc if isinstance(exc, ValueError) else "OSQP could not factor it"
             raise ValueError(f"the linear MPC's QP over {N} samples cannot be set up ({reason}): "
@@ -270,6 +344,8 @@ class InverseLinearMpc:
     def reset(self) -> None:
         """Forget estimate, plan, compensation memory and counters."""
         self.compensation.reset()
+        if self.functions is not None:
+            self._memory = self.functions.memory_at_rest.copy()
         self._started = False
         self._u_last = 0.0
         self._v_last = 0.0
@@ -279,8 +355,8 @@ class InverseLinearMpc:
         self.predicted_output = float("nan")
 
     def _restart(self, z) -> None:
-        self._z = np.concatenate((np.asarray(self._initial_state(z), float), np.zeros(self.model.nd)))
-        self._P = self._p0.copy()
+        self._z = np.concatenate((np.asarray(self.initial_state(z), float).ravel(), np.zeros(self.model.nd)))
+        self._P = self.matrices.initial_covariance.copy()
 
     def step(self, measurement, ref_window) -> float:
         """One sample: a measurement and the references ``r_k..r_{k+N}`` in, the input out.
@@ -329,6 +405,8 @@ class InverseLinearMpc:
             The planned actuator inputs ``u_0..u_{N−1}``.
         """
         v = self._solve(measurement, ref_window)
+        if self.functions is not None:
+            return np.asarray(self._compiled["inputs_along"](self._memory, self._virtual_plan), float).ravel()
         virtual = self._plan if self._plan is not None else np.full(self.horizon, v)
         return np.asarray(self.compensation.inputs_along(virtual), float)
 
@@ -349,7 +427,12 @@ class InverseLinearMpc:
         u : float
             Actuator input sent.
         """
-        self._v_last = self.compensation.to_virtual(u)
+        if self.functions is not None:  # as the generated controller: the same Functions
+            memory, state, covariance = self._compiled["applied"](self._memory, self._z, self._P.ravel(order="F"), u)
+            self._memory, self._z = np.asarray(memory, float).ravel(), np.asarray(state, float).ravel()
+            self._P = np.asarray(covariance, float).reshape(len(self._z), -1, order="F")
+        else:
+            self._v_last = self.compensation.to_virtual(u)
         self.compensation.applied(u)
         self._u_last = u
         self._started = True
@@ -364,19 +447,21 @@ class InverseLinearMpc:
         ref = np.asarray(ref_window, float).ravel()[1: N + 1]
         self.compensation.update(measurement)
         z = np.asarray(self.compensation.sensors(measurement), float)
-        kf = self._kalman
+        if self.functions is not None:
+            return self._solve_as_generated(z, ref)
+        kf = self.matrices
         if self._started:
-            self._z = kf["A"] @ self._z + kf["B"] * self._v_last + kf["f"]
-            self._P = kf["A"] @ self._P @ kf["A"].T + kf["Q"]
+            self._z = kf.A @ self._z + kf.B * self._v_last + kf.f
+            self._P = kf.A @ self._P @ kf.A.T + kf.Q
         else:
             self._restart(z)
-        self.predicted_output = float(kf["Cy"] @ self._z + kf["y0"])
+        self.predicted_output = float(kf.Cy @ self._z + kf.y0)
         if self.model.nz:  # a feed-forward remainder (no sensors) only predicts
-            C = kf["C"]
-            gain = np.linalg.solve(C @ self._P @ C.T + kf["R"], C @ self._P).T
-            self._z = self._z + gain @ (z - C @ self._z - kf["z0"])
+            C = kf.C
+            gain = np.linalg.solve(C @ self._P @ C.T + kf.R, C @ self._P).T
+            self._z = self._z + gain @ (z - C @ self._z - kf.z0)
             joseph = np.eye(len(self._z)) - gain @ C
-            self._P = joseph @ self._P @ joseph.T + gain @ kf["R"] @ gain.T
+            self._P = joseph @ self._P @ joseph.T + gain @ kf.R @ gain.T
         if not np.all(np.isfinite(self._z)):
             self._restart(z)
         state = self._z
@@ -388,27 +473,71 @@ class InverseLinearMpc:
         rate_low, rate_high = -np.inf, np.inf
         if np.isfinite(b.rate):
             steps = (to_v(max(u_prev - b.rate, b.lower)) - v_prev, to_v(min(u_prev + b.rate, b.upper)) - v_prev)
-            rate_low, rate_high = -max(-min(steps), 0.0), max(max(steps), 0.0)
-        free = self._Phi @ state + self._offset
+            least = SMALLEST_WIDTH * (v_high - v_low) if s.qp == "ipm" else 0.0  # the method needs l < u
+            rate_low, rate_high = -max(-min(steps), least), max(max(steps), least)
+        free = kf.Phi @ state + kf.offset
         e0 = np.zeros(N)
         e0[0] = v_prev
-        grad = 2 * (s.q_output * self._G.T @ (free - ref) - s.r_rate * self._D.T @ e0)
+        grad = 2 * (s.q_output * kf.G.T @ (free - ref) - s.r_rate * kf.D.T @ e0)
         lower = np.concatenate((np.full(N, v_low), np.full(N, rate_low)))
         upper = np.concatenate((np.full(N, v_high), np.full(N, rate_high)))
         lower[N] += v_prev
         upper[N] += v_prev
-        lower, upper = np.maximum(lower, -1e30), np.minimum(upper, 1e30)
         start = time.perf_counter()
-        self._qp.update(q=grad, l=lower, u=upper)
-        result = self._qp.solve(raise_error=False)
+        if s.qp == "ipm":  # rows of finite bounds only (qp_rows)
+            rows = self._rows.size1()
+            x, residual, _ = self._ipm(kf.hessian, grad, self._rows, lower[:rows], upper[:rows])
+            x = np.asarray(x, float).ravel()
+            solved = float(residual) <= QP_TOLERANCE
+        else:
+            lower, upper = np.maximum(lower, -1e30), np.minimum(upper, 1e30)
+            self._qp.update(q=grad, l=lower, u=upper)
+            result = self._qp.solve(raise_error=False)
+            x, solved = result.x, result.info.status_val in (1, 2)
         self.solve_times.append(time.perf_counter() - start)
-        if result.info.status_val in (1, 2) and np.all(np.isfinite(result.x)):
-            self._plan = result.x
-            return float(result.x[0])
+        if solved and np.all(np.isfinite(x)):
+            self._plan = x
+            return float(x[0])
         self.failures += 1
         v = float(self._plan[1]) if self._plan is not None else v_prev
         self._plan = None
         return v
+
+    def _solve_as_generated(self, z, ref) -> float:
+        """:meth:`_solve` by :attr:`functions` (the filter's time update ran in :meth:`applied`)."""
+        kf, N = self.matrices, self.horizon
+        started = self._started
+        if started:
+            self.predicted_output = float(kf.Cy @ self._z + kf.y0)
+        state = self._z if started else np.zeros(len(kf.A))
+        covariance = self._P.ravel(order="F") if started else np.zeros(len(kf.A) ** 2)
+        plan = self._plan if self._plan is not None else np.zeros(N)
+        start = time.perf_counter()
+        out = self._compiled["plan"](self._memory, state, covariance, plan, float(self._plan is not None), z,
+                                  float(started), ref, self._u_last if started else 0.0)
+        self.solve_times.append(time.perf_counter() - start)
+        state, covariance, plan, solved, virtual = (np.asarray(v, float).ravel() for v in out)
+        self._z, self._P = state, covariance.reshape(len(state), -1, order="F")
+        if not started:
+            self.predicted_output = float("nan")
+        self._virtual_plan = virtual
+        if solved[0] > 0.5:
+            self._plan = plan
+        else:
+            self.failures += 1
+            self._plan = None
+        return float(virtual[0])
+
+    def qp_rows(self) -> np.ndarray:
+        """The constraint rows of the ``ipm`` QP: bounds on ``v``, and on its changes when the rate is bounded.
+
+        Returns
+        -------
+        ndarray
+            ``I``, or ``[I; D]`` with a finite rate (the interior-point QP needs finite bounds).
+        """
+        N = self.horizon
+        return np.vstack((np.eye(N), self.matrices.D)) if np.isfinite(self.bounds.rate) else np.eye(N)
 
     def stats(self) -> dict:
         """QP failures (each one a fallback).
@@ -416,6 +545,25 @@ class InverseLinearMpc:
         Returns
         -------
         dict
-            ``name`` (``osqp``), ``failures`` and ``fallbacks`` (the same count).
+            ``name`` (``osqp`` or ``ipm``), ``failures`` and ``fallbacks`` (the same count).
         """
-        return {"name": "osqp", "failures": self.failures, "fallbacks": self.failures}
+        return {"name": self.settings.qp, "failures": self.failures, "fallbacks": self.failures}
+
+
+
+def _compiled_planner(planner: InverseLinearMpc):
+    """``(functions, compiled)``: the generated controller's :class:`PlannerFunctions` of ``planner``.
+
+    Also their ``applied``, ``plan`` and ``inputs_along`` compiled where they can be; ``(None,
+    None)`` where its compensation has no CasADi form.
+    """
+    from hystmpc.mpc.codegen.toolchain import compiled_or_slower
+    from hystmpc.mpc.embedded_planner import PlannerFunctions
+    from hystmpc.mpc.expressions import NotGeneratable
+    try:
+        functions = PlannerFunctions(planner)
+    except NotGeneratable:
+        return None, None
+    compiled = {name: compiled_or_slower(getattr(functions, name), "the linear MPC runs in-process, slower")
+                for name in ("applied", "plan", "inputs_along")}
+    return functions, compiled

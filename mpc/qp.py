@@ -32,6 +32,11 @@ below this, i.e. once the complementarity has reached its floor. A residual of 1
 enough: with complementarity left, a constraint can sit 1e-4 of its width from where it
 belongs (seen on ``tests/test_qp.py``'s problems)."""
 
+SMALLEST_WIDTH = 1e-9
+"""A linear MPC's rate row (``lmpc.qp=ipm``) is at least this share of its box's width on
+each side of 0: the method needs ``l < u``, and a hysteresis flat near the last input (a dead
+zone) leaves no virtual change within the input rate."""
+
 
 def interior_point_qp(h_sparsity: ca.Sparsity, c_sparsity: ca.Sparsity, iterations: int = 30,
                       early_exit: bool = True) -> ca.Function:

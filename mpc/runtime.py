@@ -8,7 +8,8 @@ the settings ask for:
   driven through ``ctypes``; ``auto``, ``c`` where it can run, else ``python`` after a
   one-line notice;
 * ``nmpc.inverse_plan``: ``static`` (the inverse models at rest), or ``linear-mpc``, the plan
-  of a linear MPC that the caller builds (a bench's ``inverse-lmpc``).
+  of a linear MPC that the caller builds (a bench's ``inverse-lmpc``; generated with the
+  controller, :mod:`hystmpc.mpc.embedded_planner`).
 
 :func:`validate_nmpc` is the check of these settings that runs before any work.
 """
@@ -60,9 +61,7 @@ def generated_settings(settings: NmpcSettings) -> NmpcSettings:
 
 
 def runs_generated(settings: NmpcSettings) -> bool:
-    """Whether the controller runs as its generated C: ``runtime=c``, or ``auto`` where it can.
-
-    With ``auto``, an RTI solver and a planned inverse, it gives a one-line notice (once).
+    """Whether the controller runs as its generated C: ``runtime=c``, or ``auto`` with an RTI solver.
 
     Parameters
     ----------
@@ -72,12 +71,8 @@ def runs_generated(settings: NmpcSettings) -> bool:
     Returns
     -------
     bool
-        True for ``runtime=c``, and for ``auto`` with an RTI solver and the static inverse.
+        True for ``runtime=c``, and for ``auto`` with an RTI solver.
     """
-    if settings.runtime == "auto" and settings.solver in RTI_SOLVERS and settings.inverse_plan != "static":
-        _say_once(f"nmpc.runtime=auto: the controller runs in Python, since nmpc.inverse_plan="
-                  f"{settings.inverse_plan} has no generated form yet")
-        return False
     return settings.runtime == "c" or (settings.runtime == "auto" and settings.solver in RTI_SOLVERS)
 
 
@@ -85,8 +80,7 @@ def validate_nmpc(settings: NmpcSettings, solvers: SolverSettings | None = None)
     """``ValueError`` for NMPC settings that cannot go together or cannot run here.
 
     Cheap (no code is generated): the combinations of :meth:`NmpcSettings.check_combination`,
-    and ``runtime=c`` with a solver the generated controller lacks, a planned inverse or no
-    C compiler.
+    and ``runtime=c`` with a solver the generated controller lacks or no C compiler.
 
     Parameters
     ----------
@@ -102,10 +96,6 @@ def validate_nmpc(settings: NmpcSettings, solvers: SolverSettings | None = None)
         raise ValueError(f"nmpc.runtime=c runs the generated controller, whose solver is the RTI step; nmpc.solver is "
                          f"{settings.solver!r} (allowed with it: {', '.join(RTI_SOLVERS)}; or set nmpc.runtime=python "
                          "or auto)")
-    if settings.inverse_plan != "static":
-        raise ValueError(f"nmpc.runtime=c runs the generated controller, whose inverse-model inputs come from the "
-                         f"static inverse; nmpc.inverse_plan is {settings.inverse_plan!r} (set "
-                         "nmpc.inverse_plan=static, or nmpc.runtime=python)")
     if c_compiler() is None:
         raise ValueError(f"nmpc.runtime=c needs a C compiler ({no_compiler_reason()}); set nmpc.runtime=python or auto")
 
@@ -120,21 +110,23 @@ def _say_once(notice: str) -> None:
         LOG.warning(notice)
 
 
-def assemble_nmpc(build: Callable[[NmpcSettings], object], settings: NmpcSettings, labels: CodeLabels,
-                  planner: Callable[[], object] | None = None):
+def assemble_nmpc(build: Callable[..., object], settings: NmpcSettings, labels: CodeLabels,
+                  planner: Callable[..., object] | None = None):
     """The NMPC as ``settings`` ask: in Python or as generated C, with or without a planner.
 
     Parameters
     ----------
     build : callable
-        Builds the Python controller from NMPC settings (the other settings fixed).
+        ``build(settings, for_code=False)`` builds the Python controller from NMPC settings
+        (the other settings fixed); ``for_code=True``: the one the generated controller is
+        made from (a bench's :meth:`~hystmpc.experiments.bench.Bench.generated_config`).
     settings : NmpcSettings
         The settings asked for.
     labels : CodeLabels
         For the generated controller's header.
     planner : callable, optional
-        Builds the linear MPC whose plan ``inverse_plan=linear-mpc`` takes; ``ValueError``
-        names its reason when it cannot.
+        ``planner(for_code=False)`` builds the linear MPC whose plan ``inverse_plan=linear-mpc``
+        takes; ``ValueError`` names its reason when it cannot.
 
     Raises
     ------
@@ -150,31 +142,36 @@ def assemble_nmpc(build: Callable[[NmpcSettings], object], settings: NmpcSetting
     """
     validate_nmpc(settings)
     if runs_generated(settings):
-        return _compiled(build, settings, labels)
+        return _compiled(build, settings, labels, planner)
+    return _with_planner(build, settings, planner, False)
+
+
+def _with_planner(build, settings: NmpcSettings, planner, for_code: bool):
+    """The Python controller, with its planner attached for ``inverse_plan=linear-mpc``."""
     if settings.inverse_plan != "linear-mpc":
-        return build(settings)
+        return build(settings, for_code)
     if planner is None:
         raise ValueError("nmpc.inverse_plan=linear-mpc takes the plan of a linear MPC, and there is none here; "
                          "set nmpc.inverse_plan=static")
-    plan = planner()  # first: its checks come before the NMPC's build
+    plan = planner(for_code)  # first: its checks come before the NMPC's build
     plan.prepare_plan()
-    controller = build(settings)
+    controller = build(settings, for_code)
     controller.planner = plan
     return controller
 
 
-def _compiled(build, settings: NmpcSettings, labels: CodeLabels):
+def _compiled(build, settings: NmpcSettings, labels: CodeLabels, planner):
     """The whole generated controller, built once per distinct source into ``<cache>/controllers/``.
 
     With ``runtime=auto``, no C compiler or a model that cannot be generated gives the
     controller in Python instead, after a one-line notice.
     """
     def in_python():  # the user's solver, in Python
-        return build(replace(settings, runtime="python"))
+        return _with_planner(build, replace(settings, runtime="python"), planner, False)
     if c_compiler() is None:  # runtime=auto: validate_nmpc refuses runtime=c without a compiler
         _say_once(f"no C compiler ({no_compiler_reason()}): nmpc.runtime=auto runs the controller in Python, slower")
         return in_python()
-    python = build(generated_settings(settings))
+    python = _with_planner(build, generated_settings(settings), planner, True)
     name = "controller"
     with tempfile.TemporaryDirectory(prefix="hystmpc-controller-") as scratch:  # a cache hit writes nothing there
         written = Path(scratch) / "c"

@@ -77,9 +77,6 @@ CASES = [
       "--duration", "0.01"], 2, "solver.rti.line_search=descent applies to the condensed step only"),
     (["run", "dea", "single-sine", "--controller", "nmpc", "--set", "nmpc.runtime=c", "--no-plots", "--duration",
       "0.1"], 2, "nmpc.runtime=c runs the generated controller, whose solver is the RTI step; nmpc.solver is 'gn'"),
-    (["run", "dea", "single-sine", "--controller", "nmpc", "--set", "nmpc.runtime=c", "--set", "nmpc.solver=rti",
-      "--no-plots", "--duration", "0.1"], 2, "nmpc.inverse_plan is 'linear-mpc' (set nmpc.inverse_plan=static, or "
-     "nmpc.runtime=python)"),
     (RUN + SHORT + ["--set", "nmpc.inverse_plan=dynamic"], 2,
      "inverse_plan 'dynamic' is unknown; allowed: static, linear-mpc"),
     (RUN + SHORT + ["--set", "nmpc.runtime=fortran"], 2, "runtime 'fortran' is unknown; allowed: python, c, auto"),

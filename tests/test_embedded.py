@@ -28,7 +28,8 @@ def _pam(*assignments):
 def _python_and_generated(bench_name: str, scenario: str, duration: float, assignments=()):
     """The Python controller's run and its Functions' run (in-process) on the same plant."""
     bench = get_bench(bench_name)
-    config = bench.configure(["nmpc.solver=rti", "nmpc.runtime=python", *assignments])
+    # as the generated controller is built: the linear MPC planner's QP, dea's creep window where unset
+    config = bench.generated_config(bench.configure(["nmpc.solver=rti", "nmpc.runtime=python", *assignments]))
     python = bench.run(scenario, "nmpc", config, duration=duration)
     prepared = bench.prepare(scenario, "nmpc", config)
     functions = FunctionController(prepared.controller, *controller_functions(prepared.controller))
@@ -50,6 +51,9 @@ def _python_and_generated(bench_name: str, scenario: str, duration: float, assig
     # two starts each sample: the RTI steps from the shifted plan and from the inverse, the cheaper plan kept
     ("dea", "single-sine", 1.0, 0.5, ("memory.window=50", "nmpc.multistart=true", "nmpc.r_rate=0.01",
                                       "nmpc.inverse_plan=static")),
+    # dea's default: two starts, the second from the linear MPC's plan (its Kalman filter, box QP and KP inverse
+    # chain, the same Functions in Python with lmpc.qp=ipm), r_input pulling towards that plan, a window of 200
+    ("dea", "square", 1.5, 2.0, ()),
     ("pam", "square-20", 4.0, 1.0, ("nmpc.multistart=true",)),  # the condensed multiple-shooting step's cost
     # the second start only where the first plan tracks worse than 0.5° RMS (after the jumps)
     ("pam", "square-20", 4.0, 1.0, ("nmpc.multistart=true", "nmpc.second_start_error=0.5")),
@@ -141,8 +145,7 @@ def test_controllers_without_a_casadi_form_are_refused_with_the_reason():
     bench = get_bench("dea")
     with pytest.raises(ValueError, match="give the creep sums a window"):  # the whole history: unbounded
         controller_functions(bench.build_controller("nmpc", bench.configure(["nmpc.solver=rti"])))
-    with pytest.raises(ValueError, match="nmpc.inverse_plan=linear-mpc .* has no generated form yet: set "
-                                         "nmpc.inverse_plan=static"):  # dea's default second start: a linear MPC
+    with pytest.raises(ValueError, match="lmpc.qp is 'osqp': set lmpc.qp=ipm"):  # the planner's QP, as generated
         controller_functions(bench.build_controller("nmpc", bench.configure(["nmpc.solver=rti", "memory.window=50"])))
     bench, config = _pam()
     numpy_only = bench.build_controller("nmpc", config)

@@ -164,3 +164,81 @@ def test_a_steady_correction_is_refused_where_the_dynamics_do_not_read_d():
         build_prediction_model(Fckp(NOMINAL.fckp), 0.01, dynamics=dynamics, eps=1e-3, disturbance="hysteresis")
     build_prediction_model(Fckp(NOMINAL.fckp), 0.01, dynamics=replace(dynamics, steady_correction=None), eps=1e-3,
                            disturbance="hysteresis")
+
+
+def _dea_planner(qp: str, rate: float = np.inf, **compensation) -> InverseLinearMpc:
+    """dea's ``inverse-lmpc`` (its settings), with an input rate bound if given."""
+    from hystmpc.experiments.benches.dea import NOMINAL
+    from hystmpc.models.fckp import Fckp
+    from hystmpc.plants.dea import linear_model
+    return InverseLinearMpc(
+        linear_model(NOMINAL), InverseCompensation(Fckp(NOMINAL.fckp), **({"sensors": ("y",)} | compensation)),
+        InputBounds(0.0, NOMINAL.fckp.u_max, rate), LinearMpcSettings(horizon=15, q_output=1e4, r_rate=0.03, qp=qp),
+        process_noise=[1e-10, 1e-4, 1e-6], measurement_noise=[1e-6], initial_state=lambda z: np.array([z[0], 0.0]),
+        initial_covariance=[1e-6, 1e-4, 1e-2])
+
+
+def _planned(planner: InverseLinearMpc, rate: float, samples: int = 120,
+             failing: tuple[int, ...] = ()) -> tuple[np.ndarray, np.ndarray]:
+    """Each sample's planned inputs and virtual plan, on a fixed measured sine and fixed inputs sent.
+
+    At the samples ``failing`` a NaN reference makes the QP fail (the fallback's samples).
+    """
+    planner.reset()
+    t = 0.01 * np.arange(samples + 16)
+    refs, measured = 1.0 + 0.3 * np.sin(3 * t), 1.0 + 0.28 * np.sin(3 * t - 0.2)
+    sent = np.clip(np.cumsum(np.clip(np.diff(3.0 + 2.0 * np.sin(3 * t), prepend=0.0), -rate, rate)), 0.0, 10.0)
+    plans, virtual = [], []
+    for k in range(samples):
+        window = refs[k: k + 16].copy()
+        window[-1] = np.nan if k in failing else window[-1]
+        plans.append(planner.plan(Measurement(t=t[k], y=measured[k], sensors={}, truth={}), window))
+        virtual.append(planner._plan if planner._plan is not None else np.full(planner.horizon, np.nan))
+        planner.applied(float(sent[k]))
+    return np.array(plans), np.array(virtual)
+
+
+@pytest.mark.parametrize("rate", [np.inf, 0.05])
+def test_the_generated_planners_functions_repeat_its_numpy_sample(rate):
+    """``lmpc.qp=ipm`` runs the Functions a generated NMPC embeds (filter, bounds, the QP with the
+    rate rows, fallback, inverse chain); the NumPy sample with the same QP gives the same plans,
+    and OSQP nearly the same."""
+    generated = _dea_planner("ipm", rate)
+    assert generated.functions is not None and generated.stats()["name"] == "ipm"
+    numpy_sample = _dea_planner("ipm", rate)
+    numpy_sample.functions = None  # its NumPy code with the interior-point QP
+    osqp = _dea_planner("osqp", rate)
+    plans, virtual = _planned(generated, rate)
+    assert np.ptp(virtual[:, 0]) > 0.1 and generated.failures == 0  # the plans moved, every QP solved
+    assert np.max(np.abs(plans - _planned(numpy_sample, rate)[0])) <= 1e-8
+    # failed QPs: the last plan's next virtual input instead (after two in a row the present virtual input is
+    # held, whose inverse is not unique in a flat part of the loop: round-off picks the input there)
+    failing = (60, 90)
+    plans = _planned(generated, rate, failing=failing)[0]
+    assert generated.failures == 2 and np.all(np.isfinite(plans))
+    assert np.max(np.abs(plans - _planned(numpy_sample, rate, failing=failing)[0])) <= 1e-8
+    # the same QP's solution to OSQP's accuracy (eps 1e-7 relative to a gradient of ~1e4): the first virtual
+    # input, which is sent, to 1e-4 mm; the plan's tail, weakly determined at r_rate 0.03, to 1e-2 mm
+    other = _planned(osqp, rate)[1]
+    assert np.max(np.abs(virtual[:, 0] - other[:, 0])) <= 1e-4 and np.max(np.abs(virtual - other)) <= 1e-2
+
+
+def test_a_linear_mpc_qp_must_be_known():
+    with pytest.raises(ValueError, match="qp 'daqp' is unknown; allowed: osqp, ipm"):
+        LinearMpcSettings(qp="daqp")
+
+
+def test_a_planner_without_a_casadi_form_runs_in_numpy_and_says_why_it_cannot_be_generated():
+    from hystmpc.mpc.embedded_planner import PlannerFunctions
+    from hystmpc.mpc.expressions import NotGeneratable
+    computed = _dea_planner("ipm", sensors=lambda m, comp: [m.y])
+    driven = _dea_planner("ipm", driven_by=lambda m: m.sensors["voltage"])
+    for planner, reason in ((computed, "computes its sensors with a function; give it the measured signals' names"),
+                            (driven, "cannot be generated: .* memory follows a measured signal, not the inputs sent"),
+                            (_dea_planner("osqp"), "lmpc.qp is 'osqp': set lmpc.qp=ipm")):
+        assert planner.functions is None
+        with pytest.raises(NotGeneratable, match=reason):
+            PlannerFunctions(planner)
+    numpy_sample = _dea_planner("ipm")
+    numpy_sample.functions = None
+    assert np.max(np.abs(_planned(computed, np.inf)[0] - _planned(numpy_sample, np.inf)[0])) == 0

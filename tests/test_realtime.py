@@ -55,10 +55,7 @@ def test_rti_stays_close_to_ipopt_on_a_short_run():
 @pytest.mark.parametrize("bench_name", ["pam", "compliant", "reluctance", "dea"])
 def test_codegen_verify_over_the_whole_default_scenario(tmp_path, bench_name):
     out = tmp_path / "report.json"
-    # a fixed creep memory for C, and the static inverse (the linear MPC's plan is not generated)
-    window = ["--set", "memory.window=200", "--set", "nmpc.inverse_plan=static"] if bench_name == "dea" else []
-    assert main(["codegen", bench_name, "--verify", "--out", str(tmp_path / "c"), "--json", str(out), "--quiet",
-                 *window]) == 0
+    assert main(["codegen", bench_name, "--verify", "--out", str(tmp_path / "c"), "--json", str(out), "--quiet"]) == 0
     report = json.loads(out.read_text())
     assert report["max_input_difference"] <= 1e-8
     assert report["standalone"]["max_output_difference_first_200"] <= 1e-8
@@ -91,9 +88,8 @@ def test_the_whole_controller_fits_a_cortex_m7(tmp_path, bench_name):
     if shutil.which("arm-none-eabi-gcc") is None:
         pytest.skip("arm-none-eabi-gcc is not installed (Debian: gcc-arm-none-eabi)")
     out = tmp_path / "report.json"
-    window = ["--set", "memory.window=200", "--set", "nmpc.inverse_plan=static"] if bench_name == "dea" else []
     assert main(["codegen", bench_name, "--target", "cortex-m7", "--out", str(tmp_path / "c"), "--json", str(out),
-                 "--quiet", *window]) == 0
+                 "--quiet"]) == 0
     m7 = json.loads(out.read_text())["controller"]["cortex-m7"]
     assert m7["text"] > 50_000  # the controller was linked in, not dropped as unused
     assert m7["text"] + m7["data"] <= 256 * 1024, m7
@@ -146,8 +142,10 @@ def test_codegen_verify_needs_no_network_and_a_wrong_daqp_folder_is_an_error(tmp
 def test_codegen_refuses_an_unknown_target_and_a_target_without_a_controller(tmp_path, capsys):
     assert main(["codegen", "pam", "--target", "avr", "--out", str(tmp_path / "a")]) == 2
     assert "--target 'avr' is unknown; allowed: cortex-m7" in capsys.readouterr().err
-    assert main(["codegen", "dea", "--target", "cortex-m7", "--out", str(tmp_path / "b")]) == 2  # no window
-    assert "--target cortex-m7 builds the whole controller" in capsys.readouterr().err
+    assert main(["codegen", "reluctance", "--target", "cortex-m7", "--out", str(tmp_path / "b"),
+                 "--set", "nmpc.inverse_plan=linear-mpc"]) == 2  # a planner whose inverse has no CasADi form
+    err = capsys.readouterr().err
+    assert "--target cortex-m7 builds the whole controller, which cannot be generated: the linear MPC's" in err
     assert main(["codegen", "pam", "--target", "cortex-m7", "--out", str(tmp_path / "c"),
                  "--set", "solver.rti.qp_iterations=20"]) == 2  # a setting the step would not use
     assert "solver.rti.qp_iterations=20 applies to solver.rti.qp=ipm only" in capsys.readouterr().err
@@ -386,19 +384,16 @@ def test_runtime_auto_runs_the_generated_controller_where_it_can(tmp_path, monke
     with pytest.raises(ValueError, match="nmpc.runtime=c needs a C compiler"):
         bench.build_controller("nmpc", bench.configure(["nmpc.runtime=c"]))
     monkeypatch.delenv("CC")
-    dea = get_bench("dea")  # the whole creep memory cannot be generated: the user's solver, in Python
-    caplog.clear()
-    with caplog.at_level("WARNING", logger="hystmpc"):
-        whole_memory = dea.build_controller("nmpc", dea.configure(["nmpc.runtime=auto", "nmpc.solver=rti-c",
-                                                                   "nmpc.inverse_plan=static"]))
-    assert type(whole_memory).__name__ == "NmpcController" and whole_memory.settings.solver == "rti-c"
-    assert "nmpc.runtime=auto runs the controller in Python" in caplog.text
+    dea = get_bench("dea")  # the full creep memory: generated with a window, the linear MPC's plan included
+    generated = dea.build_controller("nmpc", dea.configure(["nmpc.runtime=auto", "nmpc.solver=rti-c"]))
+    assert type(generated).__name__ == "CompiledController"
     runtime._SAID.clear()  # said once per process
-    with caplog.at_level("WARNING", logger="hystmpc"):  # dea's default second start: a linear MPC, in Python
-        planned = dea.build_controller("nmpc", dea.configure(["nmpc.runtime=auto", "nmpc.solver=rti-c",
-                                                              "memory.window=50"]))
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="hystmpc"):  # a planner whose inverse has no CasADi form: in Python
+        planned = bench.build_controller("nmpc", bench.configure(["nmpc.inverse_plan=linear-mpc"]))
     assert type(planned).__name__ == "NmpcController" and planned.planner is not None
-    assert "the controller runs in Python, since nmpc.inverse_plan=linear-mpc has no generated form yet" in caplog.text
+    assert "the linear MPC's compensation (InverseCompensation) does not accept CasADi expressions" in caplog.text
+    assert "nmpc.runtime=auto runs the controller in Python" in caplog.text
 
 
 def test_speed_keeps_two_starts_only_for_the_solvers_that_report_a_cost():

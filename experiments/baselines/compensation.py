@@ -159,9 +159,11 @@ class InverseCompensation:
     ----------
     hysteresis : HysteresisModel
         The nominal model (its ``step`` and ``inverse_step``).
-    sensors : callable
+    sensors : callable or sequence of str
         ``(measurement, compensation) -> z``: the linear model's sensor vector
-        (``compensation.output`` is the model's output at its memory).
+        (``compensation.output`` is the model's output at its memory); or the names of the
+        measured signals it is (``("y",)``: the measured output), which a generated controller
+        can read too.
     driven_by : callable, optional
         ``measurement -> hysteresis input``: the memory follows a measured signal; None:
         it follows the applied inputs.
@@ -179,7 +181,10 @@ class InverseCompensation:
                  input_of: Callable | None = None, hysteresis_input_of: Callable | None = None,
                  virtual_of: Callable | None = None, hysteresis_output_of: Callable | None = None,
                  rest_input: float | None = None):
-        self.hysteresis, self._sensors, self._driven_by = hysteresis, sensors, driven_by
+        self.hysteresis, self._driven_by = hysteresis, driven_by
+        self.sensor_names = None if callable(sensors) else tuple(sensors)
+        self._sensors = sensors if callable(sensors) else (
+            lambda m, comp: [m.y if name == "y" else m.sensors[name] for name in self.sensor_names])
         self._rest_input = rest_input
         self._input_of = input_of or (lambda s: s)
         self._hysteresis_input_of = hysteresis_input_of or (lambda u: u)
@@ -307,6 +312,84 @@ class InverseCompensation:
         """
         return np.asarray(self._sensors(measurement, self), float)
 
+    def memory_at_rest(self) -> np.ndarray:
+        """The memory before the first sample (it follows the inputs sent).
+
+        Returns
+        -------
+        ndarray
+            The hysteresis state at rest.
+
+        Raises
+        ------
+        ValueError
+            When the memory follows a measured signal instead.
+        """
+        self._follows_inputs()
+        return np.asarray(self.hysteresis.initial_state() if self._rest_input is None
+                          else self.hysteresis.initial_state(self._rest_input), float).ravel()
+
+    def step_expression(self, memory, u):
+        """The memory moved by the input ``u``, and the virtual input ``u`` gives, as CasADi expressions.
+
+        This is :meth:`to_virtual` then :meth:`applied`, for a generated controller.
+
+        Parameters
+        ----------
+        memory : casadi.MX
+            The hysteresis state.
+        u : casadi.MX
+            The input sent.
+
+        Returns
+        -------
+        tuple
+            ``(memory_next, v)``.
+
+        Raises
+        ------
+        ValueError
+            When the memory follows a measured signal, or the model or the maps take no
+            CasADi expressions.
+        """
+        self._follows_inputs()
+        memory_next, h = self.hysteresis.step(memory, self._hysteresis_input_of(u))
+        return memory_next, self._virtual_of(h)
+
+    def inputs_along_function(self, n: int) -> ca.Function:
+        """:meth:`inputs_along` for ``n`` virtual inputs: ``(memory, vs) -> inputs``, not compiled.
+
+        Parameters
+        ----------
+        n : int
+            Number of virtual inputs.
+
+        Returns
+        -------
+        casadi.Function
+            NaN where an input is out of reach (the memory then held).
+
+        Raises
+        ------
+        ValueError
+            When the model's inverse or the maps take no CasADi expressions.
+        """
+        size = len(self.hysteresis.initial_state() if self._state is None else self._state)
+        x, target = ca.SX.sym("state", size), ca.SX.sym("target")
+        step = ca.Function("inverse_step", [x, target], [*self.hysteresis.inverse_step(x, target)])
+        start, vs = ca.MX.sym("state", size), ca.MX.sym("v", n)
+        state, inputs = start, []
+        for j in range(n):
+            state_next, h = step(state, self._hysteresis_output_of(vs[j]))
+            reachable = ca.fabs(h) < ca.inf
+            state = ca.if_else(reachable, state_next, state)
+            inputs.append(ca.if_else(reachable, self._input_of(h), np.nan))
+        return ca.Function("inputs_along", [start, vs], [ca.vertcat(*inputs)])
+
+    def _follows_inputs(self) -> None:
+        if self._driven_by is not None:
+            raise ValueError("this compensation's memory follows a measured signal, not the inputs sent")
+
     def prepare_chain(self, n: int) -> None:
         """Build (and compile) :meth:`inputs_along` for ``n`` virtual inputs now, not at the first sample.
 
@@ -323,21 +406,11 @@ class InverseCompensation:
         None when the model's inverse has no CasADi form; the Python loop then runs, after a notice.
         """
         if n not in self._chains:
-            size = len(self.hysteresis.initial_state() if self._state is None else self._state)
             fun = None
             try:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    x, target = ca.SX.sym("state", size), ca.SX.sym("target")
-                    step = ca.Function("inverse_step", [x, target], [*self.hysteresis.inverse_step(x, target)])
-                    start, vs = ca.MX.sym("state", size), ca.MX.sym("v", n)
-                    state, inputs = start, []
-                    for j in range(n):
-                        state_next, h = step(state, self._hysteresis_output_of(vs[j]))
-                        reachable = ca.fabs(h) < ca.inf
-                        state = ca.if_else(reachable, state_next, state)
-                        inputs.append(ca.if_else(reachable, self._input_of(h), np.nan))
-                    fun = ca.Function("inputs_along", [start, vs], [ca.vertcat(*inputs)])
+                    fun = self.inputs_along_function(n)
             except Exception as exc:  # noqa: BLE001 - a NumPy-only inverse fails in many ways
                 LOG.warning(f"{type(self.hysteresis).__name__}'s inverse takes no CasADi expressions "
                             f"({str(exc)[:200]}): a planned sequence of inputs is inverted in Python, slower")
