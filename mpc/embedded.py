@@ -42,7 +42,8 @@ class MemoryLayout:
 
     The estimator's parts first (a state observer: ``x``, ``d``, ``P``, the EKF covariance
     of ``[x; d]`` column-major; the exact-memory observer: ``hysteresis``, ``queue``, and
-    ``x``, ``d``, ``P`` of its EKF if it has one), then ``u_last`` (input sent last),
+    ``x``, ``d``, ``P`` of its EKF if it has one; with a linear MPC's plan, its ``planner_*``
+    parts, :class:`~hystmpc.mpc.embedded_planner.PlannerExpressions`), then ``u_last`` (input sent last),
     ``started`` (1 after the first step), ``plan`` (the last successful input plan),
     ``has_plan``, ``ref_end`` (the last preview's final reference, for the jump test),
     ``has_ref_end``, ``failures`` and ``estimator_resets`` (counters since the start), and
@@ -328,7 +329,7 @@ def controller_functions(controller, name: str = "nmpc") -> tuple[ca.Function, c
     N = controller.horizon
     planner = None
     if s.inverse_plan == "linear-mpc":
-        planner = PlannerExpressions(controller.planner, controller.sensor_names)
+        planner = PlannerExpressions(controller.planner, controller.sensor_names, N)
     layout = MemoryLayout(estimator.parts + (planner.parts if planner else ()), N,
                           estimator.initial_values + (planner.initial_values if planner else ()))
     sl = layout.slices

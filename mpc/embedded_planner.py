@@ -23,6 +23,8 @@ from hystmpc.mpc.expressions import NotGeneratable, all_finite, clip, symbolic
 from hystmpc.mpc.qp import SMALLEST_WIDTH, interior_point_qp
 from hystmpc.mpc.rti import QP_TOLERANCE
 
+STATIC_INSTEAD = "; or set nmpc.inverse_plan=static"
+"""How every refusal of a planner ends: the static inverse needs no planner."""
 COMPENSATION_METHODS = ("memory_at_rest", "step_expression", "inputs_along_function")
 """What a compensation needs beyond the :class:`~hystmpc.mpc.linear_mpc.Compensation` protocol
 to be generated."""
@@ -61,17 +63,18 @@ class PlannerFunctions:
         missing = [m for m in COMPENSATION_METHODS if not hasattr(comp, m)]
         if missing:
             raise NotGeneratable(f"the linear MPC's compensation ({type(comp).__name__}) has no {', '.join(missing)}, "
-                                 "which its generated form needs (an InverseCompensation has them)")
+                                 f"which its generated form needs (an InverseCompensation has them){STATIC_INSTEAD}")
         if planner.settings.qp != "ipm":
             raise NotGeneratable(f"the generated linear MPC solves its QP by the interior-point method; lmpc.qp is "
-                                 f"{planner.settings.qp!r}: set lmpc.qp=ipm")
+                                 f"{planner.settings.qp!r}: set lmpc.qp=ipm{STATIC_INSTEAD}")
         if model.nz and getattr(comp, "sensor_names", None) is None:
             raise NotGeneratable("the linear MPC's compensation computes its sensors with a function; give it the "
-                                 "measured signals' names instead (InverseCompensation(..., sensors=('y',)))")
+                                 "measured signals' names instead (InverseCompensation(..., sensors=('y',)))"
+                                 + STATIC_INSTEAD)
         try:
             self.memory_at_rest = np.asarray(comp.memory_at_rest(), float)
         except ValueError as exc:
-            raise NotGeneratable(f"the linear MPC's compensation cannot be generated: {exc}") from None
+            raise NotGeneratable(f"the linear MPC's compensation cannot be generated: {exc}{STATIC_INSTEAD}") from None
         self.planner, self.compensation, self.matrices = planner, comp, planner.matrices
         self.horizon, self.n = planner.horizon, model.nx + model.nd
         qp_rows = ca.sparsify(ca.DM(planner.qp_rows()))
@@ -95,7 +98,8 @@ class PlannerFunctions:
             return make()
         except Exception as exc:  # noqa: BLE001 - a NumPy-only model or map fails in many ways
             raise NotGeneratable(f"the linear MPC's compensation ({type(self.compensation).__name__}) does not "
-                                 f"accept CasADi expressions ({type(exc).__name__}: {str(exc)[:200]})") from None
+                                 f"accept CasADi expressions ({type(exc).__name__}: {str(exc)[:200]})"
+                                 + STATIC_INSTEAD) from None
 
     def _moved(self, memory, u):
         """``(memory_next, v)``: the compensation's memory moved by ``u``, and the virtual input ``u`` gives."""
@@ -164,6 +168,8 @@ class PlannerExpressions:
         The linear MPC, with ``lmpc.qp=ipm``.
     sensor_names : sequence of str
         The NMPC's sensors, in the order of its measurement vector ``z``.
+    horizon : int
+        The NMPC's horizon (the planner's must be the same).
 
     Raises
     ------
@@ -171,13 +177,16 @@ class PlannerExpressions:
         When a part has no CasADi form, saying which.
     """
 
-    def __init__(self, planner, sensor_names):
+    def __init__(self, planner, sensor_names, horizon: int):
         functions = planner.functions if getattr(planner, "functions", None) is not None else PlannerFunctions(planner)
         names = getattr(planner.compensation, "sensor_names", None) or ()
         unmeasured = [n for n in names if n not in sensor_names]
         if unmeasured:
             raise NotGeneratable(f"the linear MPC reads {', '.join(unmeasured)}, which the NMPC does not measure "
-                                 f"(it reads {', '.join(sensor_names)})")
+                                 f"(it reads {', '.join(sensor_names)}){STATIC_INSTEAD}")
+        if horizon != functions.horizon:
+            raise NotGeneratable(f"the linear MPC plans over {functions.horizon} samples and the NMPC over {horizon}: "
+                                 f"give both the same horizon{STATIC_INSTEAD}")
         self.functions, self.bounds = functions, planner.bounds
         self.sensor_index = [list(sensor_names).index(n) for n in names]
         n, N = functions.n, functions.horizon

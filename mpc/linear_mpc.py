@@ -310,18 +310,20 @@ class InverseLinearMpc:
         self.model, self.compensation, self.bounds, self.settings = model, compensation, bounds, settings
         self.sensor_names = model.sensor_names
         N = settings.horizon
+        names = getattr(compensation, "sensor_names", None)
+        if names is not None and len(names) != model.nz:
+            raise ValueError(f"the compensation reads {len(names)} signals ({', '.join(names) or 'none'}); the linear "
+                             f"model has {model.nz} sensors ({', '.join(model.sensor_names) or 'none'})")
         self.initial_state = initial_state
         self.matrices = condense(model, settings, process_noise, measurement_noise, initial_covariance)
         P = self.matrices.hessian
         try:
             if not np.all(np.isfinite(P)):
                 raise ValueError("its Hessian is not finite")
-            self.functions = None
             if settings.qp == "ipm":
                 from hystmpc.mpc.qp import interior_point_qp
                 self._rows = ca.sparsify(ca.DM(self.qp_rows()))
                 self._ipm = interior_point_qp(ca.Sparsity.dense(N, N), self._rows.sparsity())
-                self.functions, self._compiled = _compiled_planner(self)
             else:
                 self._qp = osqp.OSQP()
                 self._qp.setup(P=sparse.csc_matrix(np.triu(P)), q=np.zeros(N),
@@ -334,6 +336,7 @@ class InverseLinearMpc:
                              f"its linear model's prediction is not usable (largest |P| entry "
                              f"{np.max(np.abs(np.nan_to_num(P, nan=np.inf))):.3g}); check the model's "
                              "parameters") from None
+        self.functions, self._compiled = _compiled_planner(self) if settings.qp == "ipm" else (None, None)
         self.reset()
 
     @property
@@ -416,7 +419,7 @@ class InverseLinearMpc:
         That is the compensation's compiled inverse over the horizon, where it has one.
         """
         prepare = getattr(self.compensation, "prepare_chain", None)
-        if prepare is not None:
+        if prepare is not None and self.functions is None:  # else the compiled functions' chain is used
             prepare(self.horizon)
 
     def applied(self, u: float) -> None:
@@ -518,8 +521,9 @@ class InverseLinearMpc:
         self.solve_times.append(time.perf_counter() - start)
         state, covariance, plan, solved, virtual = (np.asarray(v, float).ravel() for v in out)
         self._z, self._P = state, covariance.reshape(len(state), -1, order="F")
-        if not started:
-            self.predicted_output = float("nan")
+        if not started:  # from the state the filter starts from, before its measurement update
+            restart = np.concatenate((np.asarray(self.initial_state(z), float).ravel(), np.zeros(self.model.nd)))
+            self.predicted_output = float(kf.Cy @ restart + kf.y0)
         self._virtual_plan = virtual
         if solved[0] > 0.5:
             self._plan = plan
@@ -557,12 +561,14 @@ def _compiled_planner(planner: InverseLinearMpc):
     Also their ``applied``, ``plan`` and ``inputs_along`` compiled where they can be; ``(None,
     None)`` where its compensation has no CasADi form.
     """
-    from hystmpc.mpc.codegen.toolchain import compiled_or_slower
+    from hystmpc.mpc.codegen.toolchain import LOG, compiled_or_slower
     from hystmpc.mpc.embedded_planner import PlannerFunctions
     from hystmpc.mpc.expressions import NotGeneratable
     try:
         functions = PlannerFunctions(planner)
-    except NotGeneratable:
+    except NotGeneratable as exc:
+        LOG.info(f"lmpc.qp=ipm: {str(exc).split('; or set')[0]}: the linear MPC runs its NumPy sample, which a "
+                 "generated controller does not repeat to the last bit")
         return None, None
     compiled = {name: compiled_or_slower(getattr(functions, name), "the linear MPC runs in-process, slower")
                 for name in ("applied", "plan", "inputs_along")}

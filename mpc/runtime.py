@@ -117,16 +117,18 @@ def assemble_nmpc(build: Callable[..., object], settings: NmpcSettings, labels: 
     Parameters
     ----------
     build : callable
-        ``build(settings, for_code=False)`` builds the Python controller from NMPC settings
-        (the other settings fixed); ``for_code=True``: the one the generated controller is
-        made from (a bench's :meth:`~hystmpc.experiments.bench.Bench.generated_config`).
+        ``build(settings)`` builds the Python controller from NMPC settings (the other
+        settings fixed); ``build(settings, True)``, for the generated controller only: the
+        one it is made from (a bench's
+        :meth:`~hystmpc.experiments.bench.Bench.generated_config`).
     settings : NmpcSettings
         The settings asked for.
     labels : CodeLabels
         For the generated controller's header.
     planner : callable, optional
-        ``planner(for_code=False)`` builds the linear MPC whose plan ``inverse_plan=linear-mpc``
-        takes; ``ValueError`` names its reason when it cannot.
+        ``planner()`` builds the linear MPC whose plan ``inverse_plan=linear-mpc`` takes
+        (``planner(True)``: the generated controller's); ``ValueError`` names its reason when
+        it cannot.
 
     Raises
     ------
@@ -149,13 +151,13 @@ def assemble_nmpc(build: Callable[..., object], settings: NmpcSettings, labels: 
 def _with_planner(build, settings: NmpcSettings, planner, for_code: bool):
     """The Python controller, with its planner attached for ``inverse_plan=linear-mpc``."""
     if settings.inverse_plan != "linear-mpc":
-        return build(settings, for_code)
+        return build(settings, True) if for_code else build(settings)
     if planner is None:
         raise ValueError("nmpc.inverse_plan=linear-mpc takes the plan of a linear MPC, and there is none here; "
                          "set nmpc.inverse_plan=static")
-    plan = planner(for_code)  # first: its checks come before the NMPC's build
+    plan = planner(True) if for_code else planner()  # first: its checks come before the NMPC's build
     plan.prepare_plan()
-    controller = build(settings, for_code)
+    controller = build(settings, True) if for_code else build(settings)
     controller.planner = plan
     return controller
 

@@ -64,7 +64,8 @@ class NmpcSettings:
     inverse models; ``linear-mpc``: the plan of the bench's ``inverse-lmpc`` baseline (a
     linear MPC on the dynamics the inverse leaves, its virtual inputs through the inverse
     hysteresis model), which also sees the dynamics and the disturbance estimate (docs/dea.md).
-    Not in the generated controller yet."""
+    The generated controller generates that plan too, with ``lmpc.qp=ipm``
+    (:mod:`hystmpc.mpc.embedded_planner`)."""
     multistart: bool = False
     """Also solve from the inverse model's inputs (unless that was the start) and keep the
     plan with the lower cost: on every sample, or only where the first plan misses

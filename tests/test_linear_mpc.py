@@ -178,15 +178,21 @@ def _dea_planner(qp: str, rate: float = np.inf, **compensation) -> InverseLinear
         initial_covariance=[1e-6, 1e-4, 1e-2])
 
 
-def _planned(planner: InverseLinearMpc, rate: float, samples: int = 120,
-             failing: tuple[int, ...] = ()) -> tuple[np.ndarray, np.ndarray]:
-    """Each sample's planned inputs and virtual plan, on a fixed measured sine and fixed inputs sent.
+def _planned(planner: InverseLinearMpc, rate: float, samples: int = 120, failing: tuple[int, ...] = (),
+             lost: tuple[int, ...] = ()) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each sample's planned inputs, virtual plan and first virtual input, on a fixed measured sine and
+    fixed inputs sent.
 
-    At the samples ``failing`` a NaN reference makes the QP fail (the fallback's samples).
+    At the samples ``failing`` a NaN reference makes the QP fail (the fallback's samples); at the
+    samples ``lost`` a NaN measurement makes the filter start again.
     """
     planner.reset()
     t = 0.01 * np.arange(samples + 16)
     refs, measured = 1.0 + 0.3 * np.sin(3 * t), 1.0 + 0.28 * np.sin(3 * t - 0.2)
+    measured[list(lost)] = np.nan
+    first = []
+    solve = planner._solve
+    planner._solve = lambda *args: first.append(solve(*args)) or first[-1]
     sent = np.clip(np.cumsum(np.clip(np.diff(3.0 + 2.0 * np.sin(3 * t), prepend=0.0), -rate, rate)), 0.0, 10.0)
     plans, virtual = [], []
     for k in range(samples):
@@ -195,7 +201,8 @@ def _planned(planner: InverseLinearMpc, rate: float, samples: int = 120,
         plans.append(planner.plan(Measurement(t=t[k], y=measured[k], sensors={}, truth={}), window))
         virtual.append(planner._plan if planner._plan is not None else np.full(planner.horizon, np.nan))
         planner.applied(float(sent[k]))
-    return np.array(plans), np.array(virtual)
+    del planner._solve
+    return np.array(plans), np.array(virtual), np.array(first)
 
 
 @pytest.mark.parametrize("rate", [np.inf, 0.05])
@@ -208,15 +215,18 @@ def test_the_generated_planners_functions_repeat_its_numpy_sample(rate):
     numpy_sample = _dea_planner("ipm", rate)
     numpy_sample.functions = None  # its NumPy code with the interior-point QP
     osqp = _dea_planner("osqp", rate)
-    plans, virtual = _planned(generated, rate)
+    plans, virtual, _ = _planned(generated, rate)
     assert np.ptp(virtual[:, 0]) > 0.1 and generated.failures == 0  # the plans moved, every QP solved
     assert np.max(np.abs(plans - _planned(numpy_sample, rate)[0])) <= 1e-8
-    # failed QPs: the last plan's next virtual input instead (after two in a row the present virtual input is
-    # held, whose inverse is not unique in a flat part of the loop: round-off picks the input there)
-    failing = (60, 90)
-    plans = _planned(generated, rate, failing=failing)[0]
-    assert generated.failures == 2 and np.all(np.isfinite(plans))
-    assert np.max(np.abs(plans - _planned(numpy_sample, rate, failing=failing)[0])) <= 1e-8
+    # failed QPs: the last plan's next virtual input instead, and after two in a row the present virtual input
+    # held (its inverse is not unique in a flat part of the loop: round-off picks the input there, so the
+    # virtual inputs are compared); a NaN measurement: the filter starts again from the sensors
+    failing, lost = (60, 61, 90), (100,)
+    plans, _, first = _planned(generated, rate, failing=failing, lost=lost)
+    assert generated.failures == 4 and np.all(np.isfinite(plans))  # the NaN sample fails its QP too
+    numpy_plans, _, numpy_first = _planned(numpy_sample, rate, failing=failing, lost=lost)
+    assert np.max(np.abs(first - numpy_first)) <= 1e-10  # mm; round-off in the QP reaches ~1e-12
+    assert np.max(np.abs(np.delete(plans - numpy_plans, 61, axis=0))) <= 1e-8
     # the same QP's solution to OSQP's accuracy (eps 1e-7 relative to a gradient of ~1e4): the first virtual
     # input, which is sent, to 1e-4 mm; the plan's tail, weakly determined at r_rate 0.03, to 1e-2 mm
     other = _planned(osqp, rate)[1]
@@ -229,8 +239,16 @@ def test_a_linear_mpc_qp_must_be_known():
 
 
 def test_a_planner_without_a_casadi_form_runs_in_numpy_and_says_why_it_cannot_be_generated():
-    from hystmpc.mpc.embedded_planner import PlannerFunctions
+    from hystmpc.mpc.embedded_planner import PlannerExpressions, PlannerFunctions
     from hystmpc.mpc.expressions import NotGeneratable
+    with pytest.raises(ValueError, match="sensors must be a function .* or a sequence of measured signals' names "
+                                         "such as \\('y',\\); got 'y'"):
+        _dea_planner("ipm", sensors="y")
+    with pytest.raises(ValueError, match="the compensation reads 2 signals \\(y, y\\); the linear model has 1 sensors"):
+        _dea_planner("ipm", sensors=("y", "y"))
+    with pytest.raises(NotGeneratable, match="plans over 15 samples and the NMPC over 10: give both the same horizon; "
+                                             "or set nmpc.inverse_plan=static"):
+        PlannerExpressions(_dea_planner("ipm"), ("y",), 10)
     computed = _dea_planner("ipm", sensors=lambda m, comp: [m.y])
     driven = _dea_planner("ipm", driven_by=lambda m: m.sensors["voltage"])
     for planner, reason in ((computed, "computes its sensors with a function; give it the measured signals' names"),
@@ -239,6 +257,5 @@ def test_a_planner_without_a_casadi_form_runs_in_numpy_and_says_why_it_cannot_be
         assert planner.functions is None
         with pytest.raises(NotGeneratable, match=reason):
             PlannerFunctions(planner)
-    numpy_sample = _dea_planner("ipm")
-    numpy_sample.functions = None
-    assert np.max(np.abs(_planned(computed, np.inf)[0] - _planned(numpy_sample, np.inf)[0])) == 0
+    generated = _dea_planner("ipm")
+    assert np.max(np.abs(_planned(computed, np.inf)[0] - _planned(generated, np.inf)[0])) <= 1e-8

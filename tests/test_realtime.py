@@ -391,7 +391,7 @@ def test_runtime_auto_runs_the_generated_controller_where_it_can(tmp_path, monke
     caplog.clear()
     with caplog.at_level("WARNING", logger="hystmpc"):  # a planner whose inverse has no CasADi form: in Python
         planned = bench.build_controller("nmpc", bench.configure(["nmpc.inverse_plan=linear-mpc"]))
-    assert type(planned).__name__ == "NmpcController" and planned.planner is not None
+    assert type(planned).__name__ == "NmpcController" and planned.planner.settings.qp == "osqp"  # the user's
     assert "the linear MPC's compensation (InverseCompensation) does not accept CasADi expressions" in caplog.text
     assert "nmpc.runtime=auto runs the controller in Python" in caplog.text
 

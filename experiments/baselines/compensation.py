@@ -182,6 +182,10 @@ class InverseCompensation:
                  virtual_of: Callable | None = None, hysteresis_output_of: Callable | None = None,
                  rest_input: float | None = None):
         self.hysteresis, self._driven_by = hysteresis, driven_by
+        names = not callable(sensors) and not isinstance(sensors, str) and hasattr(sensors, "__iter__")
+        if not (callable(sensors) or (names and all(isinstance(n, str) for n in sensors))):
+            raise ValueError(f"sensors must be a function (measurement, compensation) -> z or a sequence of measured "
+                             f"signals' names such as ('y',); got {sensors!r}")
         self.sensor_names = None if callable(sensors) else tuple(sensors)
         self._sensors = sensors if callable(sensors) else (
             lambda m, comp: [m.y if name == "y" else m.sensors[name] for name in self.sensor_names])
