@@ -151,8 +151,9 @@ def verify_controller(bench: Bench, config: dict, out: Path, name: str, duration
     Returns
     -------
     dict
-        The largest input difference, both runs' RMSE and failures, and the example loop's
-        timing and input difference (``RuntimeError`` when the loop fails).
+        The largest input difference, both runs' RMSE and failures (and the linear MPC
+        planner's, where it is the second start), and the example loop's timing and input
+        difference (``RuntimeError`` when the loop fails).
     """
     config = controller_config(bench, config)
     scenario = bench.scenarios[bench.default_scenario]
@@ -180,6 +181,9 @@ def verify_controller(bench: Bench, config: dict, out: Path, name: str, duration
     return {"scenario": scenario.name, "samples": int(len(c_run.input)), "max_input_difference": diff,
             "rmse": {"python": python.metrics["rmse"], "c": c_run.metrics["rmse"]},
             "failures": {"python": python.solver["failures"], "c": c_run.solver["failures"]},
+            **({"planner_failures": {"python": python.solver["planner_failures"],
+                                     "c": c_run.solver["planner_failures"]}}
+               if "planner_failures" in python.solver else {}),
             "sample_period_us": 1e6 * bench.sample_period, "example_loop": loop}
 
 

@@ -465,7 +465,8 @@ def controller_code(controller, name: str) -> ControllerCode:
     bounds = controller.bounds
     return ControllerCode(
         feedback=feedback, prepare=prepare, initial_memory=tuple(float(v) for v in layout.initial()),
-        offsets={key: sl[key].start for key in ("failures", "u_last", "estimator_resets")},
+        offsets={key: sl[key].start for key in ("failures", "u_last", "estimator_resets", "planner_failures")
+                 if key in sl},
         horizon=controller.horizon, sensor_names=tuple(controller.sensor_names),
         bounds=(float(bounds.lower), float(bounds.upper), float(bounds.rate)), iterations=rti.iterations,
         extra_step_tolerance=rti.extra_step_tolerance, warm_start=controller.settings.warm_start, qp=rti.qp,
@@ -668,9 +669,11 @@ class FunctionController:
         Returns
         -------
         dict
-            ``name`` (``generated``), ``failures``, ``estimator_resets`` and ``statuses``
-            (status code -> samples).
+            ``name`` (``generated``), ``failures``, ``estimator_resets``, ``statuses``
+            (status code -> samples) and, with a linear MPC's plan, ``planner_failures``.
         """
         sl = self.layout.slices
+        planner = {"planner_failures": int(self.mem[sl["planner_failures"]][0])} if "planner_failures" in sl else {}
         return {"name": "generated", "failures": int(self.mem[sl["failures"]][0]),
-                "estimator_resets": int(self.mem[sl["estimator_resets"]][0]), "statuses": dict(self.statuses)}
+                "estimator_resets": int(self.mem[sl["estimator_resets"]][0]), "statuses": dict(self.statuses),
+                **planner}

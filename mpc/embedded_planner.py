@@ -160,7 +160,8 @@ class PlannerExpressions:
 
     Parts: ``planner_memory`` (the compensation's hysteresis state), ``planner_state`` and
     ``planner_covariance`` (the Kalman filter's ``[x; d]`` and its covariance, column-major),
-    ``planner_plan`` (the last virtual plan) and ``planner_has_plan``.
+    ``planner_plan`` (the last virtual plan), ``planner_has_plan`` and ``planner_failures``
+    (its failed QPs since the start).
 
     Parameters
     ----------
@@ -191,7 +192,8 @@ class PlannerExpressions:
         self.sensor_index = [list(sensor_names).index(n) for n in names]
         n, N = functions.n, functions.horizon
         self.parts = (("planner_memory", len(functions.memory_at_rest)), ("planner_state", n),
-                      ("planner_covariance", n * n), ("planner_plan", N), ("planner_has_plan", 1))
+                      ("planner_covariance", n * n), ("planner_plan", N), ("planner_has_plan", 1),
+                      ("planner_failures", 1))
         self.initial_values = (("planner_memory", tuple(float(v) for v in functions.memory_at_rest)),)
 
     def prepare(self, part, u_last) -> dict:
@@ -232,7 +234,8 @@ class PlannerExpressions:
         Returns
         -------
         parts : dict
-            ``planner_state``, ``planner_covariance``, ``planner_plan``, ``planner_has_plan``.
+            ``planner_state``, ``planner_covariance``, ``planner_plan``, ``planner_has_plan``,
+            ``planner_failures``.
         plan : callable
             ``plan(needed)``: the planned inputs (bounded, a non-finite one replaced by
             ``u_last``) where ``needed`` is true, zeros where it is false, through a switch, so
@@ -244,7 +247,7 @@ class PlannerExpressions:
             memory, part("planner_state"), part("planner_covariance"), part("planner_plan"),
             part("planner_has_plan"), z, started, refs, u_last)
         parts = {"planner_state": state, "planner_covariance": covariance, "planner_plan": plan,
-                 "planner_has_plan": has_plan}
+                 "planner_has_plan": has_plan, "planner_failures": part("planner_failures") + ca.logic_not(has_plan)}
         return parts, self._plan_switch(memory, virtual_plan, u_last, float(self.bounds.lower),
                                         float(self.bounds.upper))
 

@@ -215,3 +215,24 @@ def test_sensitivity_block_is_refused_where_it_would_not_apply(bench_name, assig
     bench = get_bench(bench_name)
     with pytest.raises(ValueError, match=match):
         bench.build_controller("nmpc", bench.configure(["nmpc.solver=rti", *assignments]))
+
+
+def test_the_linear_mpc_plans_failed_qps_are_counted_as_in_python():
+    """dea's default (the linear MPC's plan as second start): a NaN displacement restarts both
+    estimates from the NaN sensor, the planner's QP fails on it and the next sample, and the
+    Functions count those failures (``planner_failures``) and send the Python controller's inputs."""
+    bench = get_bench("dea")
+    config = bench.generated_config(bench.configure(["nmpc.solver=rti"]))
+    python = bench.build_controller("nmpc", config)
+    functions = FunctionController(python, *controller_functions(python))
+    python.reset()
+    u_py, u_fn = [], []
+    for k in range(30):
+        reference = np.full(python.horizon + 1, 1.0 + 0.002 * k)
+        meas = Measurement(t=0.01 * k, y=np.nan if k == 15 else 0.9 + 0.004 * k, sensors={})
+        u_py.append(python.step(meas, reference))
+        u_fn.append(functions.step(meas, reference))
+    assert python.stats()["planner_failures"] >= 1
+    assert functions.stats()["planner_failures"] == python.stats()["planner_failures"]
+    assert np.all(np.isfinite(u_fn))
+    np.testing.assert_allclose(u_fn, u_py, rtol=0, atol=1e-9)

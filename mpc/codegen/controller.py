@@ -69,7 +69,8 @@ class ControllerCode:
     initial_memory: tuple[float, ...]
     """The memory before the first step (its length is the memory's size)."""
     offsets: dict[str, int]
-    """Where ``failures``, ``u_last`` and ``estimator_resets`` sit in the memory."""
+    """Where ``failures``, ``u_last``, ``estimator_resets`` and, with a linear MPC's plan,
+    ``planner_failures`` sit in the memory."""
     horizon: int
     sensor_names: tuple[str, ...]
     bounds: tuple[float, float, float]
@@ -175,6 +176,8 @@ def write_controller(code: ControllerCode, out: Path, name: str, signals: Signal
                   initial=", ".join(repr(float(v)) for v in code.initial_memory),
                   failures=code.offsets["failures"], u_last=code.offsets["u_last"],
                   resets=code.offsets["estimator_resets"],
+                  planner_failures=(f"(long)ctrl->mem[{code.offsets['planner_failures']}]"
+                                    if "planner_failures" in code.offsets else "-1"),
                   **sizes)
     if code.qp_dimensions is not None:
         n, m, ms = code.qp_dimensions
@@ -337,6 +340,9 @@ class CompiledController:
         self._resets = self._lib[f"{name}_estimator_resets"]
         self._resets.restype = ctypes.c_long
         self._resets.argtypes = [ctypes.c_void_p]
+        self._planner_failures = self._lib[f"{name}_planner_failures"]
+        self._planner_failures.restype = ctypes.c_long
+        self._planner_failures.argtypes = [ctypes.c_void_p]
         self._predicted = self._lib[f"{name}_predicted_output"]
         self._predicted.restype = ctypes.c_double
         self._predicted.argtypes = [ctypes.c_void_p]
@@ -393,10 +399,12 @@ class CompiledController:
         Returns
         -------
         dict
-            ``name``, ``failures``, ``fallbacks``, ``estimator_resets``, and ``statuses`` (count
-            per status, named as in :data:`STATUS_CODES`).
+            ``name``, ``failures``, ``fallbacks``, ``estimator_resets``, ``statuses`` (count per
+            status, named as in :data:`STATUS_CODES`) and, with a linear MPC's plan as the
+            second start, ``planner_failures``.
         """
-        failures = int(self._failures(self._ctrl))
+        failures, planner_failures = int(self._failures(self._ctrl)), int(self._planner_failures(self._ctrl))
         return {"name": "generated C", "failures": failures, "fallbacks": failures,
                 "estimator_resets": int(self._resets(self._ctrl)),
-                "statuses": {STATUS_CODES.get(code, str(code)): n for code, n in self.statuses.items()}}
+                "statuses": {STATUS_CODES.get(code, str(code)): n for code, n in self.statuses.items()},
+                **({"planner_failures": planner_failures} if planner_failures >= 0 else {})}
