@@ -203,6 +203,35 @@ class Bench:
                for key, value in config.items()}
         return self.generated(out) if self.generated is not None else out
 
+    def generated_changes(self, config: dict[str, Any], name: str = "nmpc") -> tuple[str, ...]:
+        """The settings :meth:`generated_config` changes for controller ``name``, as ``KEY=VALUE``.
+
+        Only the groups it reads count (and its planner's, where it takes a linear MPC's plan).
+
+        Parameters
+        ----------
+        config : dict
+            The configuration.
+        name : str, optional
+            The controller.
+
+        Returns
+        -------
+        tuple of str
+            ``("memory.window=200", "lmpc.qp=ipm")`` on dea's defaults, ``()`` where nothing changes.
+        """
+        spec = self._spec(name)
+        groups = list(spec.groups)
+        planned = any(getattr(config.get(g), "inverse_plan", "") == "linear-mpc" for g in groups)
+        if planned and spec.planner in self.controllers:
+            groups += [g for g in self.controllers[spec.planner].groups if g not in groups]
+        if not planned:  # a linear MPC's settings matter to the generated NMPC only as its planner
+            groups = [g for g in groups if not isinstance(config.get(g), LinearMpcSettings)]
+        generated = self.generated_config(config)
+        return tuple(f"{group}.{f.name}={getattr(generated[group], f.name)}" for group in groups if group in config
+                     for f in fields(config[group])
+                     if getattr(generated[group], f.name) != getattr(config[group], f.name))
+
     def build_controller(self, name: str, config: dict[str, Any]) -> Controller:
         """Controller ``name`` built from ``config``.
 
@@ -239,7 +268,8 @@ class Bench:
         [group] = nmpc
         labels = self.labels
         code_labels = CodeLabels(Signals(labels.output_name, labels.units, labels.input_units,
-                                         tuple(labels.sensor_units)), self.sample_period, self.name, version())
+                                         tuple(labels.sensor_units)), self.sample_period, self.name, version(),
+                                 self.generated_changes(config, name))
         generated = self.generated_config(config)
         generated_groups = self._groups(generated, spec.groups, f"controller {name!r}")
 

@@ -110,7 +110,9 @@ def write_controller(bench: Bench, config: dict, out: Path, name: str | None = N
     Returns
     -------
     dict
-        What was written: names, sizes, the memory layout.
+        What was written: names, sizes, the memory layout, and ``generated_with``: the settings
+        it was built with where they differ from ``config``'s
+        (:meth:`~hystmpc.experiments.bench.Bench.generated_changes`).
 
     Raises
     ------
@@ -124,8 +126,9 @@ def write_controller(bench: Bench, config: dict, out: Path, name: str | None = N
     controller = bench.build_controller("nmpc", controller_config(bench, config))
     labels = bench.labels
     signals = Signals(labels.output_name, labels.units, labels.input_units, tuple(labels.sensor_units))
-    return codegen.write_controller(controller_code(controller, f"{name}_nmpc"), out, name, signals,
-                                    bench.sample_period, bench.name, version(), build)
+    report = codegen.write_controller(controller_code(controller, f"{name}_nmpc"), out, name, signals,
+                                      bench.sample_period, bench.name, version(), build)
+    return {**report, "generated_with": list(bench.generated_changes(config))}
 
 
 def verify_controller(bench: Bench, config: dict, out: Path, name: str, duration: float | None = None) -> dict:

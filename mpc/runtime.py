@@ -42,6 +42,9 @@ class CodeLabels:
     """Where the controller comes from (a bench's name)."""
     version: str
     """The hystmpc version that wrote it."""
+    changes: tuple[str, ...] = ()
+    """Settings the generated controller is built with where they differ from those asked for
+    (``memory.window=200``: what C needs), said once before it runs."""
 
 
 def generated_settings(settings: NmpcSettings) -> NmpcSettings:
@@ -174,6 +177,9 @@ def _compiled(build, settings: NmpcSettings, labels: CodeLabels, planner):
         _say_once(f"no C compiler ({no_compiler_reason()}): nmpc.runtime=auto runs the controller in Python, slower")
         return in_python()
     python = _with_planner(build, generated_settings(settings), planner, True)
+    if labels.changes:
+        _say_once(f"nmpc.runtime={settings.runtime}: the generated controller is built with "
+                  f"{', '.join(labels.changes)} (what C needs; docs/realtime.md)")
     name = "controller"
     with tempfile.TemporaryDirectory(prefix="hystmpc-controller-") as scratch:  # a cache hit writes nothing there
         written = Path(scratch) / "c"

@@ -70,6 +70,7 @@ def test_codegen_verify_over_the_whole_default_scenario(tmp_path, bench_name):
     assert verify["failures"]["c"] == verify["failures"]["python"]
     if bench_name == "dea":  # its second start: the linear MPC's plan, generated too
         assert verify["planner_failures"]["c"] == verify["planner_failures"]["python"]
+        assert controller["generated_with"] == ["memory.window=200", "lmpc.qp=ipm"]
     name = controller["name"]
     assert {f"{name}.h", f"{name}.c", f"{name}_nmpc.c", "main.c", "Makefile", f"lib{name}.so",
             f"{name}_main"} <= set(controller["files"])
@@ -139,6 +140,18 @@ def test_codegen_verify_needs_no_network_and_a_wrong_daqp_folder_is_an_error(tmp
     capsys.readouterr()
     assert main(["codegen", "pam", "--verify", "--duration", "0.5", "--out", str(tmp_path / "d"), "--quiet"]) == 2
     assert "HYSTMPC_DAQP_SOURCES=" in capsys.readouterr().err
+
+
+def test_the_generated_configuration_says_what_it_changes():
+    dea = get_bench("dea")
+    config = dea.configure()
+    generated = dea.generated_config(config)
+    assert generated["memory"].window == 200 and generated["lmpc"].qp == "ipm"  # C's creep window, C's QP
+    assert config["memory"].window == 0 and config["lmpc"].qp == "osqp"  # the user's, unchanged
+    assert dea.generated_changes(config) == ("memory.window=200", "lmpc.qp=ipm")
+    assert dea.generated_changes(dea.configure(["memory.window=50", "nmpc.inverse_plan=static"])) == ()
+    pam = get_bench("pam")
+    assert pam.generated_changes(pam.configure()) == ()
 
 
 def test_codegen_refuses_an_unknown_target_and_a_target_without_a_controller(tmp_path, capsys):
@@ -387,8 +400,10 @@ def test_runtime_auto_runs_the_generated_controller_where_it_can(tmp_path, monke
         bench.build_controller("nmpc", bench.configure(["nmpc.runtime=c"]))
     monkeypatch.delenv("CC")
     dea = get_bench("dea")  # the full creep memory: generated with a window, the linear MPC's plan included
-    generated = dea.build_controller("nmpc", dea.configure(["nmpc.runtime=auto", "nmpc.solver=rti-c"]))
+    with caplog.at_level("WARNING", logger="hystmpc"):
+        generated = dea.build_controller("nmpc", dea.configure(["nmpc.runtime=auto", "nmpc.solver=rti-c"]))
     assert type(generated).__name__ == "CompiledController"
+    assert "the generated controller is built with memory.window=200, lmpc.qp=ipm" in caplog.text
     runtime._SAID.clear()  # said once per process
     caplog.clear()
     with caplog.at_level("WARNING", logger="hystmpc"):  # a planner whose inverse has no CasADi form: in Python

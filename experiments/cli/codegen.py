@@ -106,6 +106,9 @@ def command(args) -> int:
         else:
             print(f"whole controller (estimator, warm start, solver, fallback) in {ctrl['folder']}: {ctrl['name']}.h "
                   f"documents the interface; example loop {ctrl['name']}_main")
+            if ctrl.get("generated_with"):
+                print(f"  built with {', '.join(ctrl['generated_with'])}: what the generated controller needs "
+                      "(docs/realtime.md)")
         if args.target in ctrl:
             m7 = ctrl[args.target]
             if ctrl["sensitivity_block"]:
