@@ -13,13 +13,12 @@ Controllers (all see the laser displacement; none knows the plant's true paramet
 * ``linear-mpc``: OSQP on a linear model linearised at the first reference, Ts 0.01 s,
   prediction 15, control horizon 5, output weight 0.13, rate weight 0.75, u ∈ [0, 10] V,
   with an input-disturbance Kalman filter for offset-free tracking;
-* ``inverse-lmpc``: the inverse FCKP model in series with the voltage (its memory follows
-  the applied voltages) and a linear MPC on the mechanics linearised at 1.5 mm, with the
-  NMPC's horizon, bounds, preview and input disturbance (creep and mismatch land in it);
-* ``nmpc``: single-shooting NMPC on the smooth FCKP model with the GL sum split into
-  in-horizon terms and a history term computed outside the NLP, solved
-  from its shifted plan and from ``inverse-lmpc``'s plan each sample; its EKF learns the
-  stroke as well as an offset.
+* ``inverse-lmpc``: the inverse FCKP model in series with the voltage (its memory follows the
+  voltages sent) and a linear MPC on the mechanics linearised at 1.5 mm, with the NMPC's
+  horizon, bounds, preview and input disturbance (creep and mismatch land in it);
+* ``nmpc``: single-shooting NMPC on the smooth FCKP model, the GL sum split into in-horizon
+  terms and a history term outside the NLP, solved from its shifted plan and from
+  ``inverse-lmpc``'s plan each sample; its EKF learns the stroke and an offset.
 
 Every scenario starts with a 2 s raised-cosine approach from rest to the reference's first
 value, then runs the paper's 40 s; the metrics cover all 42 s.
@@ -39,16 +38,9 @@ from hystmpc.experiments.runner import Scenario
 from hystmpc.experiments.signals import after_approach, square_wave, triangle_wave
 from hystmpc.models.fckp import Fckp
 from hystmpc.models.prediction import Smoothing
-from hystmpc.mpc import (
-    DisturbanceEKF,
-    InputBounds,
-    MemoryObserver,
-    NmpcController,
-    NmpcSettings,
-    RtiSettings,
-    SolverSettings,
-)
+from hystmpc.mpc import DisturbanceEKF, MemoryObserver, NmpcController
 from hystmpc.mpc.linear_mpc import InverseLinearMpc, LinearMpcSettings
+from hystmpc.mpc.settings import InputBounds, NmpcSettings, RtiSettings, SolverSettings
 from hystmpc.plants.dea import DeaActuator, DeaParams, linear_model, prediction_model
 
 NOMINAL = DeaParams()
@@ -75,17 +67,9 @@ PAPER_TABLE_2 = {"bic": (0.0035, 0.0044), "backstepping": (0.0046, 0.0071), "pid
 """wang2025 Table 2, single-sine: MAE and RMSE (mm)."""
 PAPER_TABLE_3 = {"bic": (0.0111, 0.0133), "bic-no-creep": (0.0202, 0.0235)}
 """wang2025 Table 3, composite: MAE and RMSE (mm), with and without creep compensation."""
-
-
 GENERATED_WINDOW = 200
-"""The creep window of the generated controller where ``memory.window`` asks for the full
-memory, which grows without bound (2.5 % RMSE on composite in Python, docs/dea.md)."""
-
-
-def _generated(config: dict) -> dict:
-    """The configuration of the generated controller: a creep window instead of the full memory."""
-    memory = config["memory"]
-    return {**config, "memory": replace(memory, window=memory.window or GENERATED_WINDOW)}
+"""The generated controller's creep window where ``memory.window`` asks for the full memory,
+which grows without bound (2.5 % RMSE on composite in Python, docs/dea.md)."""
 
 
 @dataclass(frozen=True)
@@ -93,8 +77,7 @@ class MemorySettings:
     """The creep memory the model-based controllers keep (``--set memory.window=200``)."""
 
     window: int = 0
-    """Past samples in the GL sums of the prediction and history terms; 0: the full memory
-    (the generated controller then keeps :data:`GENERATED_WINDOW`)."""
+    """Past samples in the GL sums of the prediction and history terms; 0: the full memory."""
 
     def __post_init__(self):
         if self.window < 0:
@@ -254,7 +237,7 @@ BENCH = Bench(
     input_bounds=(0.0, NOMINAL.fckp.u_max),
     loop=("voltage", "W", "voltage [V]", "FCKP output W [mm]"),
     default_scenario="single-sine",
-    generated=_generated,
+    generated=lambda c: {**c, "memory": replace(c["memory"], window=c["memory"].window or GENERATED_WINDOW)},
     fixed={"plant.fckp.sample_period": SAMPLED, "model.fckp.sample_period": SAMPLED,
            "model.disturbance": "the controllers' model has no d(t); it is the plant's (plant.disturbance), and "
                                 "the disturbance estimate takes it up",
