@@ -9,7 +9,8 @@ from hystmpc.experiments.baselines import InverseCompensation
 from hystmpc.experiments.benches import get_bench
 from hystmpc.models.power_function import PowerFunctionHysteresis
 from hystmpc.mpc import InputBounds
-from hystmpc.mpc.linear_mpc import InverseLinearMpc, LinearMpcSettings, linearise, one_sample_delay
+from hystmpc.mpc.linear_mpc import InverseLinearMpc, LinearMpcSettings, one_sample_delay
+from hystmpc.mpc.linear_mpc_matrices import linearise
 from hystmpc.plants.base import Measurement
 from hystmpc.plants.pam_joint import PamJointParams, linear_model
 
