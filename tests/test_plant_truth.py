@@ -15,7 +15,7 @@ from hystmpc.experiments.actuator_file import ActuatorSpec
 from hystmpc.experiments.baselines import PidController, PidGains
 from hystmpc.experiments.cli import main
 from hystmpc.experiments.runner import Scenario
-from hystmpc.experiments.tuning import mean_rmse
+from hystmpc.experiments.tuning import GAIN_MARGIN, mean_rmse, pid_cost
 from hystmpc.models.linear_dynamics import LinearDynamics
 from hystmpc.models.prandtl_ishlinskii import PrandtlIshlinskii
 from hystmpc.plants.actuator import BlendedActuator, HysteresisActuator
@@ -129,3 +129,18 @@ def test_a_document_without_a_validation_takes_the_runner_up_whole(tmp_path):
     doc["validation"] = None
     (tmp_path / "piezo_model.json").write_text(json.dumps(doc))
     assert ActuatorSpec(path).runner_up_weight() == 1.0
+
+
+def test_a_candidate_without_its_gain_margin_is_rejected():
+    plant = _lag_plant(PrandtlIshlinskii(0.1, (10.0,), (0.02,)))
+    steps = Scenario("steps", "", 0.4, lambda t: np.where(np.asarray(t) < 0.2, 3.0, 6.0))
+
+    def build(gains):
+        return PidController(gains, DT, (0.0, 100.0))
+    edge, safe = PidGains(kp=10.0, ki=300.0), PidGains(kp=5.0, ki=300.0)  # kp = 20 rings, 10 does not
+    assert np.isfinite(mean_rmse(build(edge), plant, [steps]))  # calm at its own gains
+    bolder = PidGains(kp=edge.kp * GAIN_MARGIN, ki=edge.ki * GAIN_MARGIN)
+    assert mean_rmse(build(bolder), plant, [steps]) == np.inf
+    assert pid_cost(build, edge, plant, [steps]) == np.inf  # so it has no gain margin: rejected
+    assert pid_cost(build, edge, plant, [steps], reject_oscillating=False) == mean_rmse(build(edge), plant, [steps])
+    assert pid_cost(build, safe, plant, [steps]) == mean_rmse(build(safe), plant, [steps])
