@@ -9,7 +9,7 @@ moved toward it; exact and noise-free, never perturbed as the comparison's plant
 the PID gains, by Nelder–Mead on their logarithms. A candidate that rings :data:`RING_CYCLES`
 cycles or more on any run costs infinity, and so does one that rings with its gains times
 :data:`GAIN_MARGIN` (a 6 dB gain margin); when every candidate of the coarse grid does, the
-rule runs again without those tests, with a warning. Around a
+rule runs again without the margin, then without either test, with a warning each time. Around a
 SIMC-style guess for a static gain ``K`` behind a dead time ``θ`` (``ki = 1/(2Kθ)``,
 ``kp = 0.2/K``) a coarse grid (``kp`` × 0.15, 1, 5; ``ki`` × 0.1, 0.3, 1, 3, 10) picks the
 start, so the search does not settle in a poor local minimum; from there it tunes a PI,
@@ -84,7 +84,7 @@ def mean_rmse(controller, plants, scenarios: list[Scenario], reject_oscillating:
 
 
 def pid_cost(build: Callable[[PidGains], object], gains: PidGains, plants, scenarios: list[Scenario],
-             reject_oscillating: bool = True) -> float:
+             reject_oscillating: bool = True, margin: bool = True) -> float:
     """:func:`mean_rmse` of ``build(gains)``; inf also if the gains times :data:`GAIN_MARGIN` ring.
 
     Parameters
@@ -98,7 +98,10 @@ def pid_cost(build: Callable[[PidGains], object], gains: PidGains, plants, scena
     scenarios : list of Scenario
         The references.
     reject_oscillating : bool, optional
-        Apply both ringing tests (without: the mean RMSE alone).
+        A run that rings makes the cost inf (without: the mean RMSE alone).
+    margin : bool, optional
+        With ``reject_oscillating``, so does a run that rings with the gains times
+        :data:`GAIN_MARGIN`.
 
     Returns
     -------
@@ -106,7 +109,7 @@ def pid_cost(build: Callable[[PidGains], object], gains: PidGains, plants, scena
         The mean RMSE, or inf.
     """
     value = mean_rmse(build(gains), plants, scenarios, reject_oscillating)
-    if not (reject_oscillating and np.isfinite(value)):
+    if not (reject_oscillating and margin and np.isfinite(value)):
         return value
     bolder = dataclasses.replace(gains, kp=gains.kp * GAIN_MARGIN, ki=gains.ki * GAIN_MARGIN,
                                  kd=gains.kd * GAIN_MARGIN)
@@ -145,7 +148,8 @@ def coarse_start(cost: Callable, static_gain: float, dead_time: float, sample_pe
 
 def tune_pid(build: Callable[[PidGains], object], plant, scenarios: list[Scenario], static_gain: float,
              dead_time: float, sample_period: float, max_evaluations: int = 40,
-             stages: tuple[str, ...] = ("pi", "pid"), reject_oscillating: bool = True) -> tuple[PidGains, float]:
+             stages: tuple[str, ...] = ("pi", "pid"), reject_oscillating: bool = True, margin: bool = True
+             ) -> tuple[PidGains, float]:
     """The PID gains of ``build(gains)`` that minimise the mean RMSE on ``scenarios``.
 
     Parameters
@@ -167,8 +171,9 @@ def tune_pid(build: Callable[[PidGains], object], plant, scenarios: list[Scenari
     stages : tuple of str, optional
         ``("pi",)`` stops after the PI stage.
     reject_oscillating : bool, optional
-        A candidate that rings :data:`RING_CYCLES` cycles or more on any run, or does with its
-        gains times :data:`GAIN_MARGIN`, is never chosen.
+        A candidate that rings :data:`RING_CYCLES` cycles or more on any run is never chosen.
+    margin : bool, optional
+        With ``reject_oscillating``, nor one that rings with its gains times :data:`GAIN_MARGIN`.
 
     Returns
     -------
@@ -188,14 +193,19 @@ def tune_pid(build: Callable[[PidGains], object], plant, scenarios: list[Scenari
             gains = gains_of(z)
         except ValueError:
             return np.inf
-        return pid_cost(build, gains, plant, scenarios, reject_oscillating)
+        return pid_cost(build, gains, plant, scenarios, reject_oscillating, margin)
 
     start, start_cost = coarse_start(cost, static_gain, dead_time, sample_period)
     if not np.isfinite(start_cost) and reject_oscillating:
-        LOG.warning(f"every PID gain of the coarse grid rings or fails on the tuning ensemble, at its gains or at "
-                    f"{GAIN_MARGIN:g} × them; tuning without the ringing tests")
+        if margin:
+            LOG.warning(f"no PID gain of the coarse grid keeps a gain margin of {GAIN_MARGIN:g} on the tuning "
+                        f"ensemble; tuning without the margin")
+            return tune_pid(build, plant, scenarios, static_gain, dead_time, sample_period, max_evaluations, stages,
+                            margin=False)
+        LOG.warning("every PID gain of the coarse grid rings or fails on the tuning ensemble; tuning without the "
+                    "ringing test")
         return tune_pid(build, plant, scenarios, static_gain, dead_time, sample_period, max_evaluations, stages,
-                        reject_oscillating=False)
+                        reject_oscillating=False, margin=False)
     theta = max(dead_time, sample_period)
     options = {"maxfev": max_evaluations, "xatol": 0.02, "fatol": 1e-9, "initial_simplex": None}
     simplex = np.array([start, start + [1.0, 0.0], start + [0.0, 1.0]])
@@ -211,7 +221,7 @@ def tune_pid(build: Callable[[PidGains], object], plant, scenarios: list[Scenari
     return gains_of(best.x), float(best.fun)
 
 
-TUNING_RULE = "mean-rmse-ensemble-rings-below-3-gain-margin-2-mode-notch/11"
+TUNING_RULE = "mean-rmse-ensemble-rings-below-3-gain-margin-2-mode-notch/12"
 """Names the tuning rule in the cache key: change it when the rule changes."""
 
 LMPC_RATE_FACTORS = (0.01, 0.1, 1.0, 10.0, 100.0, 1e3, 1e4)
@@ -294,16 +304,17 @@ def _tune(spec: ActuatorSpec, model, config: dict) -> dict[str, Any]:
         return lambda g: spec.build_pid(config | {"model": model}, True,
                                         FeedforwardPidGains(**dataclasses.asdict(g), preview=preview))
 
-    def coarse(preview, reject=True):
+    def coarse(preview, reject, margin):
         def cost(z):
             gains = PidGains(kp=float(np.exp(z[0])), ki=float(np.exp(z[1])),
                              derivative_filter=3 * spec.sample_period)
-            return pid_cost(feedforward(preview), gains, plants, scenarios, reject)
+            return pid_cost(feedforward(preview), gains, plants, scenarios, reject, margin)
         return coarse_start(cost, gain, dead, spec.sample_period)[1]
     previews = (rule - 1, rule, rule + 1)
-    costs = {p: coarse(p) for p in previews}
-    if not np.isfinite(min(costs.values())):  # every point rings at every preview: RMSE alone decides
-        costs = {p: coarse(p, False) for p in previews}
+    for reject, margin in ((True, True), (True, False), (False, False)):  # as tune_pid falls back
+        costs = {p: coarse(p, reject, margin) for p in previews}
+        if np.isfinite(min(costs.values())):
+            break
     preview = min(previews, key=costs.get)
     gains = tune_pid(feedforward(preview), plants, scenarios, gain, dead, spec.sample_period)[0]
     return {"pid": pid, "inverse_ff_pid": FeedforwardPidGains(**dataclasses.asdict(gains), preview=preview),

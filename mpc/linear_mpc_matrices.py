@@ -16,7 +16,7 @@ import numpy as np
 
 from hystmpc.models.prediction import PredictionModel
 
-if TYPE_CHECKING:  # the settings' module imports this one
+if TYPE_CHECKING:  # linear_mpc, where the settings live, imports this module
     from hystmpc.mpc.linear_mpc import LinearMpcSettings
 
 

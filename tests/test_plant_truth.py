@@ -15,7 +15,7 @@ from hystmpc.experiments.actuator_file import ActuatorSpec
 from hystmpc.experiments.baselines import PidController, PidGains
 from hystmpc.experiments.cli import main
 from hystmpc.experiments.runner import Scenario
-from hystmpc.experiments.tuning import GAIN_MARGIN, mean_rmse, pid_cost
+from hystmpc.experiments.tuning import GAIN_MARGIN, mean_rmse, pid_cost, tune_pid
 from hystmpc.models.linear_dynamics import LinearDynamics
 from hystmpc.models.prandtl_ishlinskii import PrandtlIshlinskii
 from hystmpc.plants.actuator import BlendedActuator, HysteresisActuator
@@ -134,13 +134,36 @@ def test_a_document_without_a_validation_takes_the_runner_up_whole(tmp_path):
 def test_a_candidate_without_its_gain_margin_is_rejected():
     plant = _lag_plant(PrandtlIshlinskii(0.1, (10.0,), (0.02,)))
     steps = Scenario("steps", "", 0.4, lambda t: np.where(np.asarray(t) < 0.2, 3.0, 6.0))
+    built = []
+
+    def build(gains):
+        built.append(gains)
+        return PidController(gains, DT, (0.0, 100.0))
+    # kp 20 and ki 600 ring on this plant, kp 10 and ki 300 do not
+    edge = PidGains(kp=10.0, ki=300.0, kd=1e-4, derivative_filter=0.004)
+    safe = PidGains(kp=5.0, ki=300.0, kd=1e-4, derivative_filter=0.004)
+    assert np.isfinite(mean_rmse(build(edge), plant, [steps]))  # calm at its own gains
+    built.clear()
+    assert pid_cost(build, edge, plant, [steps]) == np.inf  # but without its gain margin: rejected
+    assert built == [edge, PidGains(kp=10.0 * GAIN_MARGIN, ki=300.0 * GAIN_MARGIN, kd=1e-4 * GAIN_MARGIN,
+                                    derivative_filter=0.004)]  # every gain times the margin, the filter kept
+    assert pid_cost(build, edge, plant, [steps], margin=False) == mean_rmse(build(edge), plant, [steps])
+    assert pid_cost(build, edge, plant, [steps], reject_oscillating=False) == mean_rmse(build(edge), plant, [steps])
+    assert pid_cost(build, safe, plant, [steps]) == mean_rmse(build(safe), plant, [steps])
+
+
+def test_tuned_gains_keep_their_margin():
+    plant = _lag_plant(PrandtlIshlinskii(0.1, (10.0,), (0.02,)))
+    steps = Scenario("steps", "", 0.4, lambda t: np.where(np.asarray(t) < 0.2, 3.0, 6.0))
 
     def build(gains):
         return PidController(gains, DT, (0.0, 100.0))
-    edge, safe = PidGains(kp=10.0, ki=300.0), PidGains(kp=5.0, ki=300.0)  # kp = 20 rings, 10 does not
-    assert np.isfinite(mean_rmse(build(edge), plant, [steps]))  # calm at its own gains
-    bolder = PidGains(kp=edge.kp * GAIN_MARGIN, ki=edge.ki * GAIN_MARGIN)
-    assert mean_rmse(build(bolder), plant, [steps]) == np.inf
-    assert pid_cost(build, edge, plant, [steps]) == np.inf  # so it has no gain margin: rejected
-    assert pid_cost(build, edge, plant, [steps], reject_oscillating=False) == mean_rmse(build(edge), plant, [steps])
-    assert pid_cost(build, safe, plant, [steps]) == mean_rmse(build(safe), plant, [steps])
+    gains, cost = tune_pid(build, plant, [steps], static_gain=0.12, dead_time=0.005, sample_period=DT,
+                           max_evaluations=12, stages=("pi",))
+    assert np.isfinite(cost)
+    doubled = PidGains(kp=gains.kp * GAIN_MARGIN, ki=gains.ki * GAIN_MARGIN, kd=gains.kd * GAIN_MARGIN,
+                       derivative_filter=gains.derivative_filter)
+    assert np.isfinite(mean_rmse(build(doubled), plant, [steps]))  # the doubled gains do not ring
+    free, _ = tune_pid(build, plant, [steps], static_gain=0.12, dead_time=0.005, sample_period=DT,
+                       max_evaluations=12, stages=("pi",), margin=False)
+    assert free.kp > gains.kp or free.ki > gains.ki  # without the margin it tunes bolder
