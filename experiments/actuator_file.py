@@ -68,7 +68,7 @@ GROUP_TABLES = ("nmpc", "smoothing", "solver", "pid", "inverse_ff_pid", "lmpc")
 """Optional tables that set the groups of the same name (as ``--set`` would)."""
 TABLES = {
     "model": {"file"},
-    "dynamics": {"kind", "natural_frequency_hz", "damping", "time_constant", "delay_samples"},
+    "dynamics": {"kind", "natural_frequency_hz", "damping", "time_constant", "delay_samples", "creep"},
     "sensor": {"noise_std"},
     "plant": {"mismatch", "seed", "truth"},
     "scenarios": {"sine_hz", "step_s", "duration_s"},
@@ -236,6 +236,8 @@ class ActuatorSpec:
         kind = self.dynamics.kind
         dynamics = {"model.dynamics.kind": f"it is the kind of the file's [dynamics] ({kind}); change it there, "
                                            "where the kind's own keys are checked"}
+        dynamics["model.dynamics.creep"] = "it is a list of [share, time_constant] pairs; set it in the file's " \
+                                           "[dynamics] or the model document"
         for key in {key for keys in KIND_KEYS.values() for key in keys} - set(KIND_KEYS[kind]):
             dynamics[f"model.dynamics.{key}"] = f"{kind} dynamics (the file's [dynamics]) have no {key}"
         return {**solver, **dynamics}
@@ -637,7 +639,7 @@ class ActuatorSpec:
                                         rest_input=float(np.clip(0.0, *self.input_bounds))),  # the plant's
             InputBounds(*self.input_bounds, self.input_rate), settings or config["lmpc"], process_noise=process,
             measurement_noise=[noise**2], initial_state=lambda z: np.concatenate(
-                ([z[0]], np.zeros(n_block - 1), np.full(model.dynamics.delay_samples, z[0]))),
+                (model.dynamics.rest_state(z[0]), np.full(model.dynamics.delay_samples, z[0]))),
             initial_covariance=initial)
 
     def tuned_gains(self, config: dict) -> dict[str, Any]:

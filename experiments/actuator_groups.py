@@ -102,7 +102,7 @@ def perturb(model: ActuatorModel, family: str, mismatch: float, seed: int) -> Ac
     """``model`` with its parameters and time constants perturbed by ±``mismatch``, seeded.
 
     The perturbed values are the family's parameters (:attr:`Family.mismatch`, polylines' outputs
-    as a whole) and the dynamics' time constants.
+    as a whole), the dynamics' time constants and its creep elements' shares and time constants.
 
     Parameters
     ----------
@@ -127,4 +127,7 @@ def perturb(model: ActuatorModel, family: str, mismatch: float, seed: int) -> Ac
     dyn = model.dynamics
     dyn = dataclasses.replace(dyn, **{n: _perturbed(getattr(dyn, n), rng, mismatch)
                                       for n in ("time_constant", "natural_frequency_hz", "damping")})
+    if dyn.creep:  # drawn after the others, so a model without creep perturbs as before
+        dyn = dataclasses.replace(dyn, creep=tuple((_perturbed(share, rng, mismatch), _perturbed(tau, rng, mismatch))
+                                                   for share, tau in dyn.creep))
     return ActuatorModel(h, dyn)

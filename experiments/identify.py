@@ -13,7 +13,7 @@ import numpy as np
 
 from hystmpc.experiments.reference import load_record
 from hystmpc.models.document import model_document
-from hystmpc.models.identification import FAMILIES, check_alignment, identify
+from hystmpc.models.identification import CREEP_FORMS, DEFAULT_CREEP, FAMILIES, check_alignment, identify
 from hystmpc.models.identify_auto import identify_auto, validation_rmse
 from hystmpc.models.linear_dynamics import KINDS
 
@@ -92,6 +92,9 @@ def identify_command(args) -> int:
     max_delay = _check(args)
     options = _options(args.family, args.overrides)
     u, y, period = load_record(args.data, "data file")
+    if args.creep not in (False, True, *CREEP_FORMS):
+        raise ValueError(f"--creep {args.creep!r}; allowed: {', '.join(CREEP_FORMS)} (or --creep alone: "
+                         f"{DEFAULT_CREEP})")
     validation = load_record(args.validate, "--validate file") if args.validate else None
     fast = load_record(args.dynamics_data, "--dynamics-data file") if args.dynamics_data else None
     for what, record in (("--validate", validation), ("--dynamics-data", fast)):

@@ -82,7 +82,7 @@ def dynamics_from(spec: dict, where: str) -> LinearDynamics:
     Parameters
     ----------
     spec : dict
-        The table: ``kind``, that kind's keys and optionally ``delay_samples``.
+        The table: ``kind``, that kind's keys and optionally ``delay_samples`` and ``creep``.
     where : str
         Where the table is, prefixed to every error message.
 
@@ -104,10 +104,10 @@ def dynamics_from(spec: dict, where: str) -> LinearDynamics:
     if unknown:
         raise ValueError(f"{where}: unknown dynamics key {unknown[0]!r}; allowed: {', '.join(sorted(allowed))}")
     own = ("kind", *KIND_KEYS[kind], "delay_samples")
-    for key in allowed - set(own):
+    for key in allowed - {*own, "creep"}:
         if key in spec:  # a key of another kind would be ignored
             raise ValueError(f"{where}: dynamics key {key!r} does not apply to kind {kind!r}; its keys: "
-                             f"{', '.join(own)}")
+                             f"{', '.join(own)}, creep")
     for key in KIND_KEYS[kind]:
         if key not in spec:  # no silent default for what describes the actuator
             raise ValueError(f"{where}: dynamics kind {kind!r} needs {key!r}; its keys: {', '.join(own)}")
@@ -117,6 +117,11 @@ def dynamics_from(spec: dict, where: str) -> LinearDynamics:
                 (key == "delay_samples" and not isinstance(value, int)):
             kind_of = "an integer" if key == "delay_samples" else "a number"
             raise ValueError(f"{where}: dynamics.{key} must be {kind_of}, got {value!r}")
+    creep = spec.get("creep", [])
+    if not isinstance(creep, list) or not all(
+            isinstance(pair, list) and len(pair) == 2 and all(isinstance(v, int | float) and not isinstance(v, bool)
+                                                               for v in pair) for pair in creep):
+        raise ValueError(f"{where}: dynamics.creep must be a list of [share, time_constant] pairs, got {creep!r}")
     try:
         return LinearDynamics(**spec)
     except (TypeError, ValueError) as exc:

@@ -36,9 +36,10 @@ from hystmpc.models.fit_plays import prandtl_ishlinskii_problem, preisach_proble
 from hystmpc.models.linear_dynamics import LinearDynamics
 from hystmpc.models.record_fit import ALIGNMENTS, Record, respond
 
-__all__ = ["FAMILIES", "MIN_SAMPLES", "OFFSET_KEYS", "Family", "FitError", "Identified", "build_hysteresis",
-           "check_alignment", "check_data", "choose_alignment", "compiled_response", "family", "fit_options",
-           "hysteresis_output", "identify", "require_resonance", "shows_resonance"]
+__all__ = ["CREEP_FORMS", "DEFAULT_CREEP", "FAMILIES", "MIN_SAMPLES", "OFFSET_KEYS", "Family", "FitError",
+           "Identified", "build_hysteresis", "check_alignment", "check_data", "choose_alignment", "compiled_response",
+           "creep_form", "family", "fit_options", "hysteresis_output", "identify", "require_resonance",
+           "shows_resonance"]
 
 MIN_SAMPLES = 50
 """Fewer samples than this are refused: no family can be told from noise on less."""
@@ -140,6 +141,35 @@ def check_alignment(alignment: str) -> None:
         raise ValueError(f"alignment {alignment!r}; allowed: next, same, auto")
 
 
+CREEP_FORMS = ("grunwald-letnikov", "kelvin-voigt")
+"""What ``creep`` may name: a fractional integral ``D^(−α)`` after the hysteresis, or
+first-order (Kelvin–Voigt) elements in the linear block."""
+DEFAULT_CREEP = "grunwald-letnikov"
+"""The form ``creep=True`` (``--creep`` alone) fits."""
+
+
+def creep_form(creep: bool | str | None) -> str | None:
+    """The creep form ``creep`` asks for: None (no creep) or one of :data:`CREEP_FORMS`.
+
+    Parameters
+    ----------
+    creep : bool, str or None
+        False or None (none), True (:data:`DEFAULT_CREEP`) or a form's name.
+
+    Returns
+    -------
+    str or None
+        The form.
+    """
+    if creep is None or creep is False:
+        return None
+    if creep is True:
+        return DEFAULT_CREEP
+    if creep not in CREEP_FORMS:
+        raise ValueError(f"creep {creep!r}; allowed: {', '.join(CREEP_FORMS)}")
+    return creep
+
+
 class FitError(RuntimeError):
     """A fit that gave no finite result (the command line's exit code 1)."""
 
@@ -173,29 +203,31 @@ def choose_alignment(u, y, sample_period: float, warm_up: int = 0) -> str:
     return min(rmse, key=rmse.get)
 
 
-def _static_fit(fam: Family, record: Record, options: dict, other: str | None, creep: bool = False):
-    """``(problem, record, fit)`` of the static refinement (with a creep if ``creep``).
+def _static_fit(fam: Family, record: Record, options: dict, other: str | None, creep: str | None = None):
+    """``(problem, record, fit)`` of the static refinement (with a creep of the form ``creep``).
 
-    With ``other``, the other row alignment gets a short refinement from the fit and replaces it
-    if it does better.
+    A Kelvin–Voigt creep rides in the fit's block (a ``none`` block with creep elements, their
+    shares moved). With ``other``, the other row alignment gets a short refinement from the fit
+    and replaces it if it does better.
     """
     from dataclasses import replace
 
-    from hystmpc.models.record_fit import refine, with_creep
+    from hystmpc.models.record_fit import creep_start, refine, with_creep
     problem = fam.problem(record, **options)
-    if creep:
+    if creep == "grunwald-letnikov":
         problem = with_creep(problem, record)
-    fit = refine(problem, record, LinearDynamics(), move_block=False)
+    block = LinearDynamics(creep=creep_start(record)) if creep == "kelvin-voigt" else LinearDynamics()
+    moving = bool(block.creep)
+    fit = refine(problem, record, block, move_block=moving)
     if other is None:
         return problem, record, fit
     start = problem.theta
     problem.theta = fit.theta
     trial_record = replace(record, alignment=other)
-    trial = refine(problem, trial_record, LinearDynamics(), move_block=False,
-                   iterations=6)
+    trial = refine(problem, trial_record, fit.block, move_block=moving, iterations=6)
     if trial.rmse < fit.rmse:
         problem.theta = trial.theta
-        return problem, trial_record, refine(problem, trial_record, LinearDynamics(), move_block=False)
+        return problem, trial_record, refine(problem, trial_record, trial.block, move_block=moving)
     problem.theta = start
     return problem, record, fit
 
@@ -214,7 +246,7 @@ def _joint(problem, record: Record, fit, kind: str, delays, fast: Record | None,
     if fast is None:
         for _ in range(2):  # the dead time again on the refined hysteresis, once
             h = problem.columns(fit.theta) @ fit.weights
-            block, _ = fit_block(h, record, kind, delays)
+            block, _ = fit_block(h, record, kind, delays, fit.block.creep)
             if fit.block.kind == kind and block.delay_samples == fit.block.delay_samples:
                 break
             fit = refine(problem, record, block, hold=problem.joint_hold)
@@ -228,7 +260,7 @@ def _joint(problem, record: Record, fit, kind: str, delays, fast: Record | None,
                                if k != "output_offset"}, LinearDynamics(), record.sample_period)
     model, creep_order = static.hysteresis()
     block, rmse = fit_block(hysteresis_output(model, creep_order, fast.u, fast.sample_period), fast, kind, delays)
-    return refine(problem, record, block, move_block=False), rmse
+    return refine(problem, record, replace(block, creep=fit.block.creep), move_block=False), rmse  # the creep: slow
 
 
 def shows_resonance(u, y, sample_period: float, alignment: str, delays, warm_up: int = 0) -> tuple[bool, str]:
@@ -299,7 +331,7 @@ def require_resonance(u, y, sample_period: float, alignment: str, delays, warm_u
 
 def identify(name: str, u, y, sample_period: float, options: dict | None = None, dynamics: str = "none",
              dynamics_data: tuple | None = None, max_delay: int = 20, alignment: str = "auto",
-             warm_up: int = 0, check_resonance: bool = True, creep: bool = False) -> Identified:
+             warm_up: int = 0, check_resonance: bool = True, creep: bool | str = False) -> Identified:
     """Fit family ``name`` to the record ``(u, y)``, with the linear block ``dynamics``.
 
     Parameters
@@ -324,9 +356,10 @@ def identify(name: str, u, y, sample_period: float, options: dict | None = None,
         Leading samples simulated but left out of the fit.
     check_resonance : bool, optional
         With ``second-order``, refuse (``ValueError``) a record that does not show a resonance.
-    creep : bool, optional
-        Fit a Grünwald–Letnikov creep ``D^(−α)`` after the hysteresis too (fckp has its own; not
-        for kp or power-function).
+    creep : bool or str, optional
+        Fit a creep after the hysteresis too: ``"grunwald-letnikov"`` (``D^(−α)``; not for kp or
+        power-function) or ``"kelvin-voigt"`` (first-order elements in the linear block, any
+        family); True is :data:`DEFAULT_CREEP`. fckp keeps its own and takes neither.
 
     Returns
     -------
@@ -341,8 +374,10 @@ def identify(name: str, u, y, sample_period: float, options: dict | None = None,
     """
     from hystmpc.models.linear_dynamics import KINDS
     fam = family(name)
-    if creep and name in ("kp", "power-function"):
-        raise ValueError(f"{name} takes no creep here; {'fckp is kp with creep' if name == 'kp' else 'fit it without'}")
+    creep = creep_form(creep)
+    if creep == "grunwald-letnikov" and name in ("kp", "power-function"):
+        raise ValueError(f"{name} takes no Grünwald–Letnikov creep; "
+                         f"{'fckp is kp with it' if name == 'kp' else 'fit it without'}, or --creep kelvin-voigt")
     u, y = check_data(u, y, sample_period)
     check_alignment(alignment)
     if dynamics not in KINDS:
@@ -359,7 +394,7 @@ def identify(name: str, u, y, sample_period: float, options: dict | None = None,
     if dynamics == "second-order" and check_resonance:
         require_resonance(u, y, sample_period, alignment, delays, warm_up, fast)
     problem, record, fit = _static_fit(fam, Record(u, y, sample_period, alignment, warm_up),
-                                       fit_options(name, options or {}), other, creep and name != "fckp")
+                                       fit_options(name, options or {}), other, None if name == "fckp" else creep)
     alignment = record.alignment
     fast = None if fast is None else Record(*fast, sample_period, alignment)
     fit, dynamics_rmse = _joint(problem, record, fit, dynamics, delays, fast, name)

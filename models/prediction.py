@@ -175,6 +175,9 @@ class InputMemory:
     steady_correction: Callable | None = None
     """``(h, d) -> h`` with ``disturbance='dynamics'``: the hysteresis output that drives the
     dynamics as ``h`` does without disturbance (None: ``h``, no correction)."""
+    rest_state: Callable | None = None
+    """``h -> sequence``: the dynamic states at rest under the hysteresis output ``h`` (NumPy or
+    CasADi); None: they start at zero."""
 
 
 @dataclass(frozen=True)
@@ -209,6 +212,9 @@ class Dynamics:
     inverse of the dynamics; NumPy). Default inverse warm starts need it."""
     discrete: bool = False
     """``rhs`` gives the next state over one sample instead of the derivative."""
+    rest_state: Callable | None = None
+    """``h -> sequence``: the states at rest under the hysteresis output ``h`` (NumPy or CasADi),
+    for states that remember it for long (a creep); None: the states start at zero."""
     disturbances: int = 1
     """Entries of ``d`` that ``rhs`` reads (``disturbance="dynamics"`` only): the estimator
     tracks them all and the NMPC holds them over the horizon, so besides the offset-free
@@ -427,7 +433,7 @@ def build_prediction_model(hysteresis: HysteresisModel, sample_period: float, *,
     if drive is None:
         memory_info = InputMemory(hysteresis, D, parts.dynamics_model(sample_period),
                                   steady_input=dynamics.steady_input, disturbance=mode, n_dynamic=n_dyn,
-                                  steady_correction=dynamics.steady_correction)
+                                  steady_correction=dynamics.steady_correction, rest_state=dynamics.rest_state)
     return PredictionModel(
         step=ca.Function(f"{name}_step", [x, u, d], [x_next], ["x", "u", "d"], ["x_next"]),
         output=ca.Function(f"{name}_output", [x, d], [y], ["x", "d"], ["y"]),
@@ -476,7 +482,8 @@ class CreepPredictionModel:
                              "rhs does not read the input, and an output that does not read h")
         self.sensor_names = dynamics.sensor_names
         self.memory = InputMemory(hysteresis, 0, self.dynamics, creep_order, dynamics.steady_input, disturbance,
-                                  steady_correction=dynamics.steady_correction, n_dynamic=self.dynamics.nx)
+                                  steady_correction=dynamics.steady_correction, n_dynamic=self.dynamics.nx,
+                                  rest_state=dynamics.rest_state)
 
     @property
     def nd(self) -> int:

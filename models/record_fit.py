@@ -21,7 +21,7 @@ static model gives ``y_{k+1} = H[u]_k``) or ``same`` (a quasi-static loop tracer
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -74,7 +74,7 @@ class Record:
 # ----- the linear block -------------------------------------------------------------------------------
 
 def block_theta(block: LinearDynamics) -> np.ndarray:
-    """The block's parameters as the refinement moves them (logarithms).
+    """The block's parameters as the refinement moves them.
 
     Parameters
     ----------
@@ -85,20 +85,21 @@ def block_theta(block: LinearDynamics) -> np.ndarray:
     -------
     ndarray
         ``[log time_constant]`` (first-order), ``[log natural_frequency_hz, log damping]``
-        (second-order) or empty.
+        (second-order) or empty, then the creep elements' shares (their time constants stay).
     """
+    shares = [share for share, _ in block.creep]
     if block.kind == "first-order":
-        return np.log([block.time_constant])
+        return np.array([np.log(block.time_constant), *shares])
     if block.kind == "second-order":
-        return np.log([block.natural_frequency_hz, block.damping])
-    return np.zeros(0)
+        return np.array([np.log(block.natural_frequency_hz), np.log(block.damping), *shares])
+    return np.array(shares, float)
 
 
-def block_bounds(kind: str, sample_period: float) -> tuple[list[float], list[float]]:
+def block_bounds(kind: str, sample_period: float, creep_elements: int = 0) -> tuple[list[float], list[float]]:
     """Search bounds of :func:`block_theta`.
 
     A lag between a tenth of a sample and 1e4 s; a resonance below Nyquist with a damping from
-    0.007 to 7.
+    0.007 to 7; each creep share from 0 to ``0.95 / creep_elements`` (so they sum below 1).
 
     Parameters
     ----------
@@ -106,20 +107,23 @@ def block_bounds(kind: str, sample_period: float) -> tuple[list[float], list[flo
         Block kind (``"none"``, ``"first-order"``, ``"second-order"``).
     sample_period : float
         Sample period (s).
+    creep_elements : int, optional
+        Number of creep elements.
 
     Returns
     -------
     tuple of list
         ``(lower, upper)``, one entry per parameter of :func:`block_theta`.
     """
+    shares = ([0.0] * creep_elements, [0.95 / creep_elements] * creep_elements) if creep_elements else ([], [])
     if kind == "first-order":
-        return [np.log(sample_period / 10)], [np.log(1e4)]
+        return [np.log(sample_period / 10), *shares[0]], [np.log(1e4), *shares[1]]
     if kind == "second-order":
-        return [np.log(1e-3), -5.0], [np.log(0.5 / sample_period), 2.0]
-    return [], []
+        return [np.log(1e-3), -5.0, *shares[0]], [np.log(0.5 / sample_period), 2.0, *shares[1]]
+    return shares
 
 
-def block_of(kind: str, theta, delay: int) -> LinearDynamics:
+def block_of(kind: str, theta, delay: int, creep_times: Sequence[float] = ()) -> LinearDynamics:
     """The block of :func:`block_theta` values.
 
     Parameters
@@ -130,18 +134,46 @@ def block_of(kind: str, theta, delay: int) -> LinearDynamics:
         Its parameters as :func:`block_theta` gives them.
     delay : int
         Dead time (samples).
+    creep_times : sequence of float, optional
+        The creep elements' time constants (s); their shares are the last entries of ``theta``.
 
     Returns
     -------
     LinearDynamics
         The block.
     """
+    m = len(creep_times)
+    main, shares = (theta[:len(theta) - m], theta[len(theta) - m:]) if m else (theta, [])
+    creep = tuple((float(share), float(tau)) for share, tau in zip(shares, creep_times, strict=True))
     if kind == "first-order":
-        return LinearDynamics("first-order", time_constant=float(np.exp(theta[0])), delay_samples=delay)
+        return LinearDynamics("first-order", time_constant=float(np.exp(main[0])), delay_samples=delay, creep=creep)
     if kind == "second-order":
-        return LinearDynamics("second-order", natural_frequency_hz=float(np.exp(theta[0])),
-                              damping=float(np.exp(theta[1])), delay_samples=delay)
-    return LinearDynamics("none", delay_samples=delay)
+        return LinearDynamics("second-order", natural_frequency_hz=float(np.exp(main[0])),
+                              damping=float(np.exp(main[1])), delay_samples=delay, creep=creep)
+    return LinearDynamics("none", delay_samples=delay, creep=creep)
+
+
+def creep_start(record: Record, elements: int = 8) -> tuple[tuple[float, float], ...]:
+    """Kelvin–Voigt creep elements to start a fit from.
+
+    Time constants from the record's length down by a factor √10 each, no shorter than 10
+    samples, at most ``elements``; shares 0.01.
+
+    Parameters
+    ----------
+    record : Record
+        The record (its length and sample period).
+    elements : int, optional
+        Most elements.
+
+    Returns
+    -------
+    tuple
+        ``((share, time_constant), ...)``, the longest first.
+    """
+    duration = record.sample_period * len(record.u)
+    taus = [duration / np.sqrt(10.0) ** k for k in range(elements)]
+    return tuple((0.01, float(tau)) for tau in taus if tau >= 10 * record.sample_period)
 
 
 def respond(columns: np.ndarray, block: LinearDynamics, record: Record) -> np.ndarray:
@@ -322,6 +354,7 @@ class Problem:
     """Entries of ``theta`` the joint refinement with a linear block leaves where the static one
     put them (every group depends on them: a Preisach grid's ends)."""
     _cache: dict = field(default_factory=dict, repr=False)
+    _creep_parts: dict = field(default_factory=dict, repr=False)
     _last: tuple | None = field(default=None, repr=False)
     _y_rows: tuple | None = field(default=None, repr=False)
 
@@ -343,13 +376,40 @@ class Problem:
     def _group(self, g: int, theta, block: LinearDynamics, record: Record, rows: np.ndarray):
         """``(key, filtered columns on rows)`` of group ``g``, cached."""
         idx, fn = self.groups[g]
-        key = (g, tuple(np.asarray(theta)[idx]), block.kind, *block_theta(block), block.delay_samples,
-               record.alignment, len(rows), int(rows[0]), int(rows[-1]))
+        key = (g, tuple(np.asarray(theta)[idx]), block.kind, *block_theta(block), block.creep_times,
+               block.delay_samples, record.alignment, len(rows), int(rows[0]), int(rows[-1]))
         if key not in self._cache:
             if len(self._cache) > 3 * len(self.groups) + 8:
                 self._cache.clear()
-            self._cache[key] = np.ascontiguousarray(respond(fn(np.asarray(theta)[idx]), block, record)[rows])
+            if block.creep:
+                filtered = self._through_creep(g, theta, block, record)
+            else:
+                filtered = respond(fn(np.asarray(theta)[idx]), block, record)
+            self._cache[key] = np.ascontiguousarray(filtered[rows])
         return key, self._cache[key]
+
+    def _through_creep(self, g: int, theta, block: LinearDynamics, record: Record) -> np.ndarray:
+        """:func:`respond` of group ``g`` through a block with creep.
+
+        Each creep element's response to the group's columns is kept (the latest per group), so
+        a step in a creep share only recombines them.
+        """
+        idx, fn = self.groups[g]
+        key = (tuple(np.asarray(theta)[idx]), block.creep_times, record.alignment, len(record.u))
+        kept = self._creep_parts.get(g)
+        if kept is None or kept[0] != key:
+            h = np.asarray(fn(np.asarray(theta)[idx]), float)
+            if record.alignment == "same":
+                h = np.vstack((h, h[-1:]))
+            start = h[:1]
+            moved = h - start
+            kept = (key, start, moved, block.creep_elements(moved, record.sample_period))
+            self._creep_parts[g] = kept
+        _, start, moved, responses = kept
+        shares = [share for share, _ in block.creep]
+        crept = start + (1.0 - sum(shares)) * moved + sum(share * r for share, r in zip(shares, responses, strict=True))
+        out = replace(block, creep=()).response(crept, record.sample_period, from_steady_state=True)
+        return out[1:] if record.alignment == "same" else out
 
     def responses(self, theta: np.ndarray, block: LinearDynamics, record: Record) -> np.ndarray:
         """The filtered, aligned columns on every sample (not cached).
@@ -542,7 +602,7 @@ def refine(problem: Problem, record: Record, block: LinearDynamics, move_block: 
     kind, delay = block.kind, block.delay_samples
     n_h = len(problem.theta)
     z0 = np.concatenate((problem.theta, block_theta(block) if move_block else []))
-    lo_d, hi_d = block_bounds(kind, record.sample_period) if move_block else ([], [])
+    lo_d, hi_d = block_bounds(kind, record.sample_period, len(block.creep)) if move_block else ([], [])
     lower, upper = np.concatenate((problem.lower, lo_d)), np.concatenate((problem.upper, hi_d))
     free = lower < upper
     free[list(hold)] = False
@@ -555,7 +615,7 @@ def refine(problem: Problem, record: Record, block: LinearDynamics, move_block: 
     def split(z_free):
         z = z0.copy()
         z[free] = z_free
-        return z[:n_h], (block_of(kind, z[n_h:], delay) if move_block else block)
+        return z[:n_h], (block_of(kind, z[n_h:], delay, block.creep_times) if move_block else block)
 
     def residual(z_free):
         theta, blk = split(z_free)
@@ -574,9 +634,12 @@ def refine(problem: Problem, record: Record, block: LinearDynamics, move_block: 
     z[free] = z_free
     at_lower = np.abs(z - lower) < 1e-6 * width
     at_lower[list(problem.lower_is_limit)] = False
+    if move_block and block.creep:  # a creep element with no share is simply not there
+        at_lower[len(z) - len(block.creep):] = False
     near = free & (at_lower | (np.abs(upper - z) < 1e-6 * width)) & (width > 0)
     names = list(problem.names) + (["time_constant"] if kind == "first-order" else
-                                   ["natural_frequency_hz", "damping"] if kind == "second-order" else [])
+                                   ["natural_frequency_hz", "damping"] if kind == "second-order" else []) + \
+        [f"creep share ({tau:.3g} s)" for tau in block.creep_times]
     fit.at_bounds = tuple(names[i] if i < len(names) else f"parameter {i}" for i in np.flatnonzero(near))
     return fit
 
@@ -598,7 +661,8 @@ def _grid(kind: str, record: Record) -> list[np.ndarray]:
     return [np.zeros(0)]
 
 
-def fit_block(h: np.ndarray, record: Record, kind: str, delays: Sequence[int]) -> tuple[LinearDynamics, float]:
+def fit_block(h: np.ndarray, record: Record, kind: str, delays: Sequence[int],
+              creep: tuple = ()) -> tuple[LinearDynamics, float]:
     """The block ``kind`` and dead time that best map one hysteresis output ``h`` onto the record.
 
     The gain and offset are projected. A grid search (each dead time with every grid block; for
@@ -615,6 +679,8 @@ def fit_block(h: np.ndarray, record: Record, kind: str, delays: Sequence[int]) -
         Block kind (``"none"``, ``"first-order"``, ``"second-order"``).
     delays : sequence of int
         Dead times to try (samples).
+    creep : tuple, optional
+        Creep elements the blocks carry (:attr:`LinearDynamics.creep`); the polish moves their shares.
 
     Returns
     -------
@@ -631,8 +697,8 @@ def fit_block(h: np.ndarray, record: Record, kind: str, delays: Sequence[int]) -
         return float(np.mean((yc - gain * fc) ** 2))
 
     def search(kind, delays):
-        return min(((cost(block_of(kind, z, d)), d, tuple(z)) for d in delays for z in _grid(kind, record)),
-                   key=lambda item: item[0])
+        return min(((cost(replace(block_of(kind, z, d), creep=creep)), d, tuple(z)) for d in delays
+                    for z in _grid(kind, record)), key=lambda item: item[0])
     if kind == "second-order":
         _, lag_delay, _ = search("first-order", delays)
         _, delay, z = search(kind, [d for d in delays if abs(d - lag_delay) <= 2] or list(delays))
@@ -640,5 +706,5 @@ def fit_block(h: np.ndarray, record: Record, kind: str, delays: Sequence[int]) -
         _, delay, z = search(kind, delays)
     problem = Problem([(np.zeros(0, int), lambda _: h[:, None])], np.zeros(0), np.zeros(0), np.zeros(0),
                       np.array([False]), lambda theta, w: {})
-    fit = refine(problem, record, block_of(kind, np.asarray(z), delay), iterations=15)
+    fit = refine(problem, record, replace(block_of(kind, np.asarray(z), delay), creep=creep), iterations=15)
     return fit.block, fit.rmse

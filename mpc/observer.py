@@ -168,7 +168,8 @@ class MemoryObserver:
         if ekf is None and (self.memory.n_dynamic or model.sensor_names):
             raise ValueError("a model with dynamic states or sensors needs an EKF")
         n_dyn = self.memory.n_dynamic
-        self.initial_state = initial_state or (lambda z: ca.DM.zeros(n_dyn) if symbolic(z) else np.zeros(n_dyn))
+        self.initial_state = initial_state or (self._at_rest if self.memory.rest_state else
+                                               (lambda z: ca.DM.zeros(n_dyn) if symbolic(z) else np.zeros(n_dyn)))
         covariance = np.diag(ekf.P).copy() if initial_covariance is None and ekf is not None else initial_covariance
         self.initial_covariance = None if covariance is None else np.asarray(covariance, float)
         if ekf is not None and not self.split:  # hold the exact states: no noise, no covariance
@@ -183,6 +184,13 @@ class MemoryObserver:
         if self.creeping and creep_window is not None:  # fixed-size sums, as a generated controller runs them
             self._push = window_functions(-self.memory.creep_order, model.sample_period, creep_window, 1)[0]
         self.reset()
+
+    def _at_rest(self, z):
+        """The dynamic states at rest at the first sensor value (the dynamics' ``rest_state``)."""
+        mem = self.memory
+        h = mem.steady_input(z[0]) if mem.steady_input is not None else z[0]
+        states = mem.rest_state(h)
+        return ca.vertcat(*states) if symbolic(z) else np.array([float(v) for v in states])
 
     def reset(self) -> None:
         """At rest: relaxed hysteresis, a queue of the rest input, empty creep memory."""

@@ -75,7 +75,7 @@ class HysteresisActuator:
         return self._sample_period
 
     def reset(self, seed: int) -> Measurement:
-        """At rest at ``rest_input``: relaxed hysteresis, dynamics at zero; seed the noise.
+        """At rest at ``rest_input``: relaxed hysteresis, dynamics at zero (or their ``rest_state``); seed the noise.
 
         Parameters
         ----------
@@ -88,8 +88,10 @@ class HysteresisActuator:
             The first measurement, at rest.
         """
         self._rng = np.random.default_rng(seed)
-        self._x = np.zeros(len(self.dynamics.state_names))
         self._hys = self.hysteresis.initial_state(self.rest_input)
+        self._x = np.zeros(len(self.dynamics.state_names))
+        if self.dynamics.rest_state is not None:  # a long memory (a creep) starts settled
+            self._x = np.array([float(v) for v in self.dynamics.rest_state(self.hysteresis.output(self._hys))])
         self._queue = [self.rest_input] * self.delay_samples
         self._u = self.rest_input
         self._t = 0.0

@@ -23,7 +23,7 @@ from scipy.signal import butter, sosfiltfilt
 
 SETTINGS = {  # stage: (identify options, output range, units): what a user would choose, knowing the kind;
     # "{steps}" stands for a record of steps written for the stage (a record that shows its resonance)
-    "preisach-creep": (["--dynamics", "first-order", "--creep"], (0.0, 12.0), "um"),
+    "preisach-creep": (["--dynamics", "first-order", "--creep", "kelvin-voigt"], (0.0, 12.0), "um"),
     "bouc-wen-resonance": (["--dynamics", "second-order"], (0.0, 8.5), "um"),
     "fast-bouc-wen": (["--dynamics", "second-order", "--dynamics-data", "{steps}"], (0.0, 9.0), "um"),
     "duhem-lag": (["--dynamics", "first-order"], (-3.0, 2.5), "mm"),

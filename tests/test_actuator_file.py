@@ -242,6 +242,33 @@ def test_set_cannot_change_the_dynamics_kind_or_give_another_kinds_parameters(pi
     assert bench.configure(["model.dynamics.damping=0.3"], tuned=False)["model"].dynamics.damping == 0.3
 
 
+def test_a_kelvin_voigt_creep_in_the_file_reaches_the_plant_and_every_controller(piezo):
+    """The file's [dynamics] may carry creep elements: the plant starts with them settled, the
+    NMPC's estimator and ``inverse-lmpc``'s linear model start from the first measurement with
+    them settled, and ``--set`` cannot change the list."""
+    import numpy as np
+
+    from hystmpc.experiments.actuator_file import ActuatorSpec
+    doc = json.loads((piezo / "piezo_model.json").read_text())
+    dynamics = {**doc["dynamics"], "creep": [[0.05, 0.4], [0.03, 4.0]]}
+    lines = "\n".join(f"{k} = {json.dumps(v)}" for k, v in dynamics.items())
+    path = piezo / "creeping.toml"
+    path.write_text((piezo / "piezo.toml").read_text() + f"\n[dynamics]\n{lines}\n")
+    spec = ActuatorSpec(path)
+    config = spec.bench().configure(["model.hysteresis.output_offset=5.0"], tuned=False)  # at rest far from 0
+    assert config["model"].dynamics.creep == ((0.05, 0.4), (0.03, 4.0))
+    plant = spec.plant_of(config["model"], noise=0.0)
+    at_rest = [plant.reset(0).y] + [plant.step(plant.rest_input).y for _ in range(300)]
+    assert np.ptp(at_rest) < 1e-12
+    nmpc, lmpc = spec.build_nmpc(config), spec.build_inverse_lmpc(config)
+    for controller in (nmpc, lmpc):
+        controller.reset()
+        u = controller.step(plant.reset(0), np.full(controller.horizon + 1, at_rest[0]))
+        assert abs(u - plant.rest_input) < 0.5, (type(controller).__name__, u)  # nothing to correct at rest
+    with pytest.raises(ValueError, match="model.dynamics.creep cannot be changed on this bench: it is a list"):
+        spec.bench().configure(["model.dynamics.creep=0.1"], tuned=False)
+
+
 def test_a_mode_notch_makes_a_step_of_the_command_reach_the_output_without_ringing():
     """The notch's zeros are the model's mode under a hold: notch then mode is the same
     mode damped at 0.7 (to rounding), static gain 1, at rest at its first input."""

@@ -11,7 +11,7 @@ from heldout_truths import TRUTHS, record
 from hystmpc.models.identify_auto import identify_auto
 
 SETTINGS = {  # what a user would ask for, knowing the actuator's kind
-    "preisach-creep": {"dynamics": "first-order", "creep": True},
+    "preisach-creep": {"dynamics": "first-order", "creep": "kelvin-voigt"},
     "bouc-wen-resonance": {"dynamics": "second-order"},
     "rate-dependent-play": {"dynamics": "first-order"},
     "duhem-saturation": {"dynamics": "first-order"},

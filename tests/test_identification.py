@@ -159,6 +159,55 @@ def test_dynamics_and_dead_time_are_recovered_from_a_faster_record():
     assert abs(d.natural_frequency_hz / 120.0 - 1) < 0.03 and abs(d.damping / 0.3 - 1) < 0.05, d
 
 
+def test_a_kelvin_voigt_creep_steps_as_its_response_and_starts_settled():
+    """The creep's discrete states (what the plant and the NMPC run) repeat the response the fit
+    uses, for every kind, from the rest state; and without creep nothing changes."""
+    rng = np.random.default_rng(3)
+    h = 2.0 + np.cumsum(rng.standard_normal(2000)) * 0.1
+    creep = ((0.06, 0.4), (0.03, 3.0))
+    for kind, keys in (("none", {}), ("first-order", {"time_constant": 0.004}),
+                       ("second-order", {"natural_frequency_hz": 60.0, "damping": 0.1})):
+        block = LinearDynamics(kind, creep=creep, **keys)
+        step = block.discrete(DT)
+        x, out = np.array(step.rest_state(h[0]), float), []
+        for value in h:
+            out.append(step.output(x, value))
+            x = np.array(step.rhs(x, 0.0, value, 0.0), float)
+        assert np.max(np.abs(np.array(out) - block.response(h, DT, from_steady_state=True))) < 1e-12, kind
+        plain = LinearDynamics(kind, **keys)
+        assert np.array_equal(plain.response(h, DT, True), LinearDynamics(kind, creep=(), **keys).response(h, DT, True))
+    held = LinearDynamics(creep=creep).response(np.r_[np.zeros(10), np.ones(5000)], DT)
+    assert abs(held[11] - 0.91) < 1e-3 and abs(held[-1] - (1 - 0.06 * np.exp(-5 / 0.4) - 0.03 * np.exp(-5 / 3))) < 1e-3
+
+
+@pytest.mark.parametrize("creep, message", [
+    ([[0.6, 1.0], [0.5, 2.0]], "creep shares sum to 1.1; they must sum below 1"),
+    ([[0.1, 0.0]], "the share must be >= 0 and the time constant > 0"),
+    ([0.1, 1.0], "must be a list of \\[share, time_constant\\] pairs")])
+def test_a_bad_creep_is_refused_naming_it(creep, message):
+    from hystmpc.models.document import dynamics_from
+    with pytest.raises(ValueError, match=message):
+        dynamics_from({"kind": "none", "creep": creep}, "model.json")
+
+
+def test_a_kelvin_voigt_creep_is_fitted_with_any_family():
+    """A PI stage whose output creeps by 9 % over two elements off the fit's time-constant ladder
+    validates at the noise; kp, which takes no Grünwald–Letnikov creep, takes this one."""
+    truth = PrandtlIshlinskii(0.05, (13.0, 31.0), (0.04, 0.02))
+    block = LinearDynamics(creep=((0.05, 0.23), (0.04, 1.7)))
+    u, u_val = fit_input(0, 100, n=2000, levels=40), validation_input(0, 100)
+
+    def record(u, seed):
+        y = block.response(hysteresis_output(truth, 0.0, u, DT) + 0.2, DT, from_steady_state=True)
+        return y + 0.01 * np.random.default_rng(seed).standard_normal(len(u))
+    fitted = identify("prandtl-ishlinskii", u, record(u, 1), DT, creep="kelvin-voigt", alignment="next")
+    assert sum(share for share, _ in fitted.dynamics.creep) == pytest.approx(0.09, abs=0.01)
+    assert np.sqrt(np.mean((fitted.predict(u_val) - record(u_val, 2)) ** 2)) < 1.1 * 0.01
+    assert identify("kp", u, record(u, 1), DT, creep="kelvin-voigt").dynamics.creep
+    with pytest.raises(ValueError, match="creep 'maxwell'; allowed: grunwald-letnikov, kelvin-voigt"):
+        identify("kp", u, u, DT, creep="maxwell")
+
+
 def test_model_document_round_trip(tmp_path):
     fitted, _, _, _ = self_fit("parametric", "same")
     path = tmp_path / "model.json"
@@ -350,7 +399,7 @@ def test_a_creep_is_fitted_after_any_family():
     y_val = measured(truth, 0.03, u_val, 0.01, 2)
     assert abs(fitted.parameters["creep_order"] / 0.03 - 1) < 0.05 and abs(fitted.offsets["output"] - 0.2) < 0.01
     assert np.sqrt(np.mean((fitted.predict(u_val) - y_val) ** 2)) < 1.1 * 0.01
-    with pytest.raises(ValueError, match="kp takes no creep here; fckp is kp with creep"):
+    with pytest.raises(ValueError, match="kp takes no Grünwald–Letnikov creep; fckp is kp with it"):
         identify("kp", u, u, DT, creep=True)
 
 

@@ -38,8 +38,10 @@ def add_parser(sub) -> None:
                       help="leading samples simulated but left out of the fit and of --validate's RMSE (default 0)")
     p_id.add_argument("--continue", dest="continue_state", action="store_true",
                       help="the --validate record continues the data record (the model's state carries over)")
-    p_id.add_argument("--creep", action="store_true", help="fit a fractional-order (Grünwald–Letnikov) creep after "
-                      "the hysteresis too (fckp has its own; kp and power-function take none)")
+    p_id.add_argument("--creep", nargs="?", const=True, default=False, metavar="FORM",
+                      help="fit a creep after the hysteresis too: grunwald-letnikov (a fractional integral; not "
+                      "for kp or power-function) or kelvin-voigt (first-order elements in the linear block, any "
+                      "family; the controller generates in C); --creep alone: grunwald-letnikov (fckp has its own)")
     p_id.add_argument("--units", default="", help="output units, recorded in the model document (e.g. um)")
     p_id.add_argument("--input-units", default="", help="input units (e.g. V)")
     p_id.add_argument("--data-file", dest="bench_data", metavar="FILE",
