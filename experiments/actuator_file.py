@@ -136,6 +136,11 @@ class ActuatorSpec:
         self.dynamics = self.identified.dynamics
         if "dynamics" in raw:
             self.dynamics = dynamics_from(raw["dynamics"], f"{where}: [dynamics]")
+            if self.identified.dynamics.creep and not self.dynamics.creep and str(self.path) + "#creep" not in _WARNED:
+                _WARNED.add(str(self.path) + "#creep")
+                LOG.warning(f"actuator file {self.path}: [dynamics] replaces the model document's whole block, and "
+                            "has no creep: the document's creep elements are left out (copy its dynamics.creep "
+                            "into [dynamics] to keep them)")
         self._warn_above_nyquist()
         sensor, plant = raw.get("sensor", {}), raw.get("plant", {})
         self.noise = self._number(sensor, "noise_std", 0.0, key="sensor.noise_std")

@@ -128,6 +128,8 @@ def perturb(model: ActuatorModel, family: str, mismatch: float, seed: int) -> Ac
     dyn = dataclasses.replace(dyn, **{n: _perturbed(getattr(dyn, n), rng, mismatch)
                                       for n in ("time_constant", "natural_frequency_hz", "damping")})
     if dyn.creep:  # drawn after the others, so a model without creep perturbs as before
-        dyn = dataclasses.replace(dyn, creep=tuple((_perturbed(share, rng, mismatch), _perturbed(tau, rng, mismatch))
-                                                   for share, tau in dyn.creep))
+        creep = [(_perturbed(share, rng, mismatch), _perturbed(tau, rng, mismatch)) for share, tau in dyn.creep]
+        total = sum(share for share, _ in creep)
+        scale = min(1.0, 0.99 / total) if total > 0 else 1.0  # the shares must stay below 1 together
+        dyn = dataclasses.replace(dyn, creep=tuple((share * scale, tau) for share, tau in creep))
     return ActuatorModel(h, dyn)

@@ -13,7 +13,7 @@ import numpy as np
 
 from hystmpc.experiments.reference import load_record
 from hystmpc.models.document import model_document
-from hystmpc.models.identification import CREEP_FORMS, DEFAULT_CREEP, FAMILIES, check_alignment, identify
+from hystmpc.models.identification import FAMILIES, check_alignment, identify
 from hystmpc.models.identify_auto import identify_auto, validation_rmse
 from hystmpc.models.linear_dynamics import KINDS
 
@@ -92,9 +92,6 @@ def identify_command(args) -> int:
     max_delay = _check(args)
     options = _options(args.family, args.overrides)
     u, y, period = load_record(args.data, "data file")
-    if args.creep not in (False, True, *CREEP_FORMS):
-        raise ValueError(f"--creep {args.creep!r}; allowed: {', '.join(CREEP_FORMS)} (or --creep alone: "
-                         f"{DEFAULT_CREEP})")
     validation = load_record(args.validate, "--validate file") if args.validate else None
     fast = load_record(args.dynamics_data, "--dynamics-data file") if args.dynamics_data else None
     for what, record in (("--validate", validation), ("--dynamics-data", fast)):
@@ -285,8 +282,13 @@ def summary(doc: dict) -> str:
     lines.append(f"  offsets: input {offsets.get('input', 0.0):.5g}, output {offsets.get('output', 0.0):.5g}; rows "
                  f"read as '{doc.get('alignment', 'next')}'")
     dyn = doc["dynamics"]
-    lines.append("  dynamics: " + ", ".join(f"{k} = {v:.5g}" if isinstance(v, float) else f"{k} = {v}"
-                                            for k, v in dyn.items()))
+    def shown(value):
+        if isinstance(value, float):
+            return f"{value:.5g}"
+        if isinstance(value, list):  # the creep's [share, time constant] pairs
+            return "[" + ", ".join(shown(v) for v in value) + "]"
+        return f"{value}"
+    lines.append("  dynamics: " + ", ".join(f"{k} = {shown(v)}" for k, v in dyn.items()))
     units = f" {units}" if units else ""
     lines.append(f"fit RMSE {doc['fit']['rmse']:.4g}{units} on {doc['fit']['n_samples']} samples"
                  + (f"; validation RMSE {doc['validation']['rmse']:.4g}{units} on "

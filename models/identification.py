@@ -18,7 +18,7 @@ are fitted on the data), so ``offsets.input`` is 0 unless set by hand.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -34,7 +34,7 @@ from hystmpc.models.families import (
 )
 from hystmpc.models.fit_plays import prandtl_ishlinskii_problem, preisach_problem
 from hystmpc.models.linear_dynamics import LinearDynamics
-from hystmpc.models.record_fit import ALIGNMENTS, Record, respond
+from hystmpc.models.record_fit import ALIGNMENTS, Record, respond, tidy_creep
 
 __all__ = ["CREEP_FORMS", "DEFAULT_CREEP", "FAMILIES", "MIN_SAMPLES", "OFFSET_KEYS", "Family", "FitError",
            "Identified", "build_hysteresis", "check_alignment", "check_data", "choose_alignment", "compiled_response",
@@ -210,8 +210,6 @@ def _static_fit(fam: Family, record: Record, options: dict, other: str | None, c
     shares moved). With ``other``, the other row alignment gets a short refinement from the fit
     and replaces it if it does better.
     """
-    from dataclasses import replace
-
     from hystmpc.models.record_fit import creep_start, refine, with_creep
     problem = fam.problem(record, **options)
     if creep == "grunwald-letnikov":
@@ -238,8 +236,6 @@ def _joint(problem, record: Record, fit, kind: str, delays, fast: Record | None,
     Returns the fit and the dynamics' own RMSE on the record they were fitted on (None without a
     block).
     """
-    from dataclasses import replace
-
     from hystmpc.models.record_fit import evaluate, fit_block, refine
     if kind == "none":
         return fit, None
@@ -359,7 +355,7 @@ def identify(name: str, u, y, sample_period: float, options: dict | None = None,
     creep : bool or str, optional
         Fit a creep after the hysteresis too: ``"grunwald-letnikov"`` (``D^(−α)``; not for kp or
         power-function) or ``"kelvin-voigt"`` (first-order elements in the linear block, any
-        family); True is :data:`DEFAULT_CREEP`. fckp keeps its own and takes neither.
+        family, fckp too, after its own); True is :data:`DEFAULT_CREEP`.
 
     Returns
     -------
@@ -394,10 +390,13 @@ def identify(name: str, u, y, sample_period: float, options: dict | None = None,
     if dynamics == "second-order" and check_resonance:
         require_resonance(u, y, sample_period, alignment, delays, warm_up, fast)
     problem, record, fit = _static_fit(fam, Record(u, y, sample_period, alignment, warm_up),
-                                       fit_options(name, options or {}), other, None if name == "fckp" else creep)
+                                       fit_options(name, options or {}), other,
+                                       None if name == "fckp" and creep == "grunwald-letnikov" else creep)
     alignment = record.alignment
     fast = None if fast is None else Record(*fast, sample_period, alignment)
     fit, dynamics_rmse = _joint(problem, record, fit, dynamics, delays, fast, name)
+    if fit.block.creep:  # an element the record did not need is not kept as a state, nor twins
+        fit.block = replace(fit.block, creep=tidy_creep(fit.block.creep))
     try:
         parameters = problem.parameters(fit.theta, fit.weights)
         offset = parameters.pop("output_offset", fit.offset)

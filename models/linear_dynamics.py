@@ -5,10 +5,14 @@ hysteresis output. The creep (:attr:`LinearDynamics.creep`) is a chain of first-
 elements in parallel between the hysteresis and the block: the output answers a held
 hysteresis output ``h`` at once with ``(1 − Σ s_i) h`` and creeps the rest of the way, each
 element's share ``s_i`` with its time constant ``τ_i``. It is a finite state, so a model with it
-generates its whole controller in C. :meth:`LinearDynamics.dynamics` gives the
-:class:`~hystmpc.models.prediction.Dynamics` both the prediction model and the simulated
-plant are built from; :meth:`LinearDynamics.response` the exact zero-order-hold response
-identification fits.
+generates its whole controller in C.
+
+:meth:`LinearDynamics.discrete` gives the :class:`~hystmpc.models.prediction.Dynamics` both
+the prediction model and the simulated plant are built from, and
+:meth:`LinearDynamics.response` the same model as a filter, which identification fits: exact
+under a zero-order hold of ``h``. With creep, the main block is driven over each sample by the
+elements' values at its end, held, which is within one sample's creep of the continuous
+:meth:`LinearDynamics.dynamics`.
 """
 
 from __future__ import annotations
@@ -52,6 +56,8 @@ class LinearDynamics:
         if not (isinstance(self.delay_samples, int) and 0 <= self.delay_samples <= 1000):
             raise ValueError(f"delay_samples must be an integer in [0, 1000], got {self.delay_samples}")
         try:
+            if any(isinstance(element, str | bytes) for element in self.creep):
+                raise TypeError
             creep = tuple((float(share), float(tau)) for share, tau in self.creep)
         except (TypeError, ValueError):
             raise ValueError(f"creep must be a list of [share, time_constant] pairs, got {self.creep!r}") from None
@@ -298,7 +304,7 @@ class LinearDynamics:
             state_names=(*block.state_names, *(f"delay_{i + 1}" for i in range(D))))
 
     def lag(self) -> float:
-        """Low-frequency group delay (s) of the block, dead time not included (a feed-forward's preview).
+        """Low-frequency group delay (s) of the block, dead time and creep not included (a feed-forward's preview).
 
         Returns
         -------

@@ -73,6 +73,13 @@ class Record:
 
 # ----- the linear block -------------------------------------------------------------------------------
 
+MOST_CREEP = 0.95
+"""Largest share of the output a fitted creep may take, all elements together."""
+FASTEST_CREEP = 100
+"""Shortest time constant of a fitted creep element (samples): a creep is slow; a faster
+element would take a share of the block's lag or dead time."""
+
+
 def block_theta(block: LinearDynamics) -> np.ndarray:
     """The block's parameters as the refinement moves them.
 
@@ -85,21 +92,24 @@ def block_theta(block: LinearDynamics) -> np.ndarray:
     -------
     ndarray
         ``[log time_constant]`` (first-order), ``[log natural_frequency_hz, log damping]``
-        (second-order) or empty, then the creep elements' shares (their time constants stay).
+        (second-order) or empty, then the creep elements' shares and the logarithms of their
+        time constants.
     """
-    shares = [share for share, _ in block.creep]
+    creep = [share for share, _ in block.creep] + [np.log(tau) for tau in block.creep_times]
     if block.kind == "first-order":
-        return np.array([np.log(block.time_constant), *shares])
+        return np.array([np.log(block.time_constant), *creep])
     if block.kind == "second-order":
-        return np.array([np.log(block.natural_frequency_hz), np.log(block.damping), *shares])
-    return np.array(shares, float)
+        return np.array([np.log(block.natural_frequency_hz), np.log(block.damping), *creep])
+    return np.array(creep, float)
 
 
 def block_bounds(kind: str, sample_period: float, creep_elements: int = 0) -> tuple[list[float], list[float]]:
     """Search bounds of :func:`block_theta`.
 
     A lag between a tenth of a sample and 1e4 s; a resonance below Nyquist with a damping from
-    0.007 to 7; each creep share from 0 to ``0.95 / creep_elements`` (so they sum below 1).
+    0.007 to 7; each creep share from 0 to :data:`MOST_CREEP` (:func:`block_of` scales them
+    down together where they sum beyond it), each creep time constant from :data:`FASTEST_CREEP`
+    samples (faster is the block's business) to 1e4 s.
 
     Parameters
     ----------
@@ -115,15 +125,17 @@ def block_bounds(kind: str, sample_period: float, creep_elements: int = 0) -> tu
     tuple of list
         ``(lower, upper)``, one entry per parameter of :func:`block_theta`.
     """
-    shares = ([0.0] * creep_elements, [0.95 / creep_elements] * creep_elements) if creep_elements else ([], [])
+    m = creep_elements
+    fastest = np.log(FASTEST_CREEP * sample_period)
+    lower_c, upper_c = [0.0] * m + [fastest] * m, [MOST_CREEP] * m + [np.log(1e4)] * m
     if kind == "first-order":
-        return [np.log(sample_period / 10), *shares[0]], [np.log(1e4), *shares[1]]
+        return [np.log(sample_period / 10), *lower_c], [np.log(1e4), *upper_c]
     if kind == "second-order":
-        return [np.log(1e-3), -5.0, *shares[0]], [np.log(0.5 / sample_period), 2.0, *shares[1]]
-    return shares
+        return [np.log(1e-3), -5.0, *lower_c], [np.log(0.5 / sample_period), 2.0, *upper_c]
+    return lower_c, upper_c
 
 
-def block_of(kind: str, theta, delay: int, creep_times: Sequence[float] = ()) -> LinearDynamics:
+def block_of(kind: str, theta, delay: int, creep_elements: int = 0) -> LinearDynamics:
     """The block of :func:`block_theta` values.
 
     Parameters
@@ -134,17 +146,22 @@ def block_of(kind: str, theta, delay: int, creep_times: Sequence[float] = ()) ->
         Its parameters as :func:`block_theta` gives them.
     delay : int
         Dead time (samples).
-    creep_times : sequence of float, optional
-        The creep elements' time constants (s); their shares are the last entries of ``theta``.
+    creep_elements : int, optional
+        Number of creep elements: their shares (scaled down together where they sum beyond
+        :data:`MOST_CREEP`) and log time constants are the last entries of ``theta``.
 
     Returns
     -------
     LinearDynamics
         The block.
     """
-    m = len(creep_times)
-    main, shares = (theta[:len(theta) - m], theta[len(theta) - m:]) if m else (theta, [])
-    creep = tuple((float(share), float(tau)) for share, tau in zip(shares, creep_times, strict=True))
+    m = creep_elements
+    theta = np.asarray(theta, float)
+    main, shares, log_taus = theta[:len(theta) - 2 * m], theta[len(theta) - 2 * m:len(theta) - m], \
+        theta[len(theta) - m:]
+    if m and np.sum(shares) > MOST_CREEP:
+        shares = shares * (MOST_CREEP / np.sum(shares))
+    creep = tuple((float(share), float(np.exp(log_tau))) for share, log_tau in zip(shares, log_taus, strict=True))
     if kind == "first-order":
         return LinearDynamics("first-order", time_constant=float(np.exp(main[0])), delay_samples=delay, creep=creep)
     if kind == "second-order":
@@ -156,8 +173,8 @@ def block_of(kind: str, theta, delay: int, creep_times: Sequence[float] = ()) ->
 def creep_start(record: Record, elements: int = 8) -> tuple[tuple[float, float], ...]:
     """Kelvin–Voigt creep elements to start a fit from.
 
-    Time constants from the record's length down by a factor √10 each, no shorter than 10
-    samples, at most ``elements``; shares 0.01.
+    Time constants from the record's length down by a factor √10 each, no shorter than
+    :data:`FASTEST_CREEP` samples, at most ``elements``; shares 0.01.
 
     Parameters
     ----------
@@ -173,7 +190,39 @@ def creep_start(record: Record, elements: int = 8) -> tuple[tuple[float, float],
     """
     duration = record.sample_period * len(record.u)
     taus = [duration / np.sqrt(10.0) ** k for k in range(elements)]
-    return tuple((0.01, float(tau)) for tau in taus if tau >= 10 * record.sample_period)
+    return tuple((0.01, float(tau)) for tau in taus if tau >= FASTEST_CREEP * record.sample_period)
+
+
+def tidy_creep(creep, least_share: float = 1e-6, ratio: float = 1.25) -> tuple[tuple[float, float], ...]:
+    """Fitted creep elements without those the record did not need, and with near twins merged.
+
+    An element with a share below ``least_share`` is left out; elements whose time constants
+    lie within ``ratio`` of each other become one, with their shares summed and the
+    share-weighted geometric mean of their time constants (one state instead of several).
+
+    Parameters
+    ----------
+    creep : sequence of (float, float)
+        ``(share, time_constant)`` pairs.
+    least_share : float, optional
+        Smallest share kept.
+    ratio : float, optional
+        Time constants closer than this factor merge.
+
+    Returns
+    -------
+    tuple
+        The elements, the shortest time constant first.
+    """
+    kept = sorted(((float(s), float(t)) for s, t in creep if s >= least_share), key=lambda e: e[1])
+    merged: list[tuple[float, float]] = []
+    for share, tau in kept:
+        if merged and tau < ratio * merged[-1][1]:
+            s0, t0 = merged[-1]
+            merged[-1] = (s0 + share, float(np.exp((s0 * np.log(t0) + share * np.log(tau)) / (s0 + share))))
+        else:
+            merged.append((share, tau))
+    return tuple(merged)
 
 
 def respond(columns: np.ndarray, block: LinearDynamics, record: Record) -> np.ndarray:
@@ -391,23 +440,27 @@ class Problem:
     def _through_creep(self, g: int, theta, block: LinearDynamics, record: Record) -> np.ndarray:
         """:func:`respond` of group ``g`` through a block with creep.
 
-        Each creep element's response to the group's columns is kept (the latest per group), so
-        a step in a creep share only recombines them.
+        Each creep element's response to the group's latest columns is kept, so a step in a
+        creep share only recombines them and a step in a time constant filters for that one.
         """
         idx, fn = self.groups[g]
-        key = (tuple(np.asarray(theta)[idx]), block.creep_times, record.alignment, len(record.u))
+        key = (tuple(np.asarray(theta)[idx]), record.alignment, len(record.u))
         kept = self._creep_parts.get(g)
         if kept is None or kept[0] != key:
             h = np.asarray(fn(np.asarray(theta)[idx]), float)
             if record.alignment == "same":
                 h = np.vstack((h, h[-1:]))
             start = h[:1]
-            moved = h - start
-            kept = (key, start, moved, block.creep_elements(moved, record.sample_period))
+            kept = (key, start, h - start, {})
             self._creep_parts[g] = kept
         _, start, moved, responses = kept
+        if len(responses) > 4 * len(block.creep) + 4:
+            responses.clear()
+        for tau in block.creep_times:
+            if tau not in responses:
+                responses[tau] = LinearDynamics(creep=((0.0, tau),)).creep_elements(moved, record.sample_period)[0]
         shares = [share for share, _ in block.creep]
-        crept = start + (1.0 - sum(shares)) * moved + sum(share * r for share, r in zip(shares, responses, strict=True))
+        crept = start + (1.0 - sum(shares)) * moved + sum(share * responses[tau] for share, tau in block.creep)
         out = replace(block, creep=()).response(crept, record.sample_period, from_steady_state=True)
         return out[1:] if record.alignment == "same" else out
 
@@ -615,7 +668,7 @@ def refine(problem: Problem, record: Record, block: LinearDynamics, move_block: 
     def split(z_free):
         z = z0.copy()
         z[free] = z_free
-        return z[:n_h], (block_of(kind, z[n_h:], delay, block.creep_times) if move_block else block)
+        return z[:n_h], (block_of(kind, z[n_h:], delay, len(block.creep)) if move_block else block)
 
     def residual(z_free):
         theta, blk = split(z_free)
@@ -634,13 +687,19 @@ def refine(problem: Problem, record: Record, block: LinearDynamics, move_block: 
     z[free] = z_free
     at_lower = np.abs(z - lower) < 1e-6 * width
     at_lower[list(problem.lower_is_limit)] = False
-    if move_block and block.creep:  # a creep element with no share is simply not there
-        at_lower[len(z) - len(block.creep):] = False
     near = free & (at_lower | (np.abs(upper - z) < 1e-6 * width)) & (width > 0)
+    m = len(block.creep) if move_block else 0
+    if m:  # an element with no share is simply not there, and its time constant means nothing
+        unused = np.array([share < 1e-6 for share, _ in blk.creep])
+        near[len(z) - 2 * m:len(z) - m] &= ~at_lower[len(z) - 2 * m:len(z) - m]
+        near[len(z) - m:] &= ~unused
     names = list(problem.names) + (["time_constant"] if kind == "first-order" else
                                    ["natural_frequency_hz", "damping"] if kind == "second-order" else []) + \
-        [f"creep share ({tau:.3g} s)" for tau in block.creep_times]
+        [f"creep share ({tau:.3g} s)" for tau in blk.creep_times] + \
+        [f"creep time constant ({tau:.3g} s)" for tau in blk.creep_times]
     fit.at_bounds = tuple(names[i] if i < len(names) else f"parameter {i}" for i in np.flatnonzero(near))
+    if move_block and sum(share for share, _ in fit.block.creep) > (1 - 1e-3) * MOST_CREEP:
+        fit.at_bounds += (f"creep shares (together at their most, {MOST_CREEP})",)
     return fit
 
 

@@ -53,6 +53,9 @@ def _csv(tmp_path, text, name="ref.csv"):
     (["compare", "pam", "--workers", "0"], "--workers must be >= 1, got 0"),
     (["compare", "pam", "--workers", "2", "--plant", "my_rig:heavy"], "--plant's plant is one"),
     (["frobnicate", "pam"], "invalid choice: 'frobnicate'"),
+    (["identify", "preisach", "--creep", "rec.csv"], "--creep 'rec.csv': not a creep form; allowed: "
+     "grunwald-letnikov, kelvin-voigt (--creep alone: grunwald-letnikov; if that was the family or the record, put "
+     "--creep after them or write --creep=FORM)"),
 ])
 def test_bad_usage_exits_2_with_one_line(capsys, argv, needle):
     code, out, err = _run(capsys, argv)

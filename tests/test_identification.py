@@ -203,7 +203,14 @@ def test_a_kelvin_voigt_creep_is_fitted_with_any_family():
     fitted = identify("prandtl-ishlinskii", u, record(u, 1), DT, creep="kelvin-voigt", alignment="next")
     assert sum(share for share, _ in fitted.dynamics.creep) == pytest.approx(0.09, abs=0.01)
     assert np.sqrt(np.mean((fitted.predict(u_val) - record(u_val, 2)) ** 2)) < 1.1 * 0.01
+    assert all(share >= 1e-6 for share, _ in fitted.dynamics.creep)  # the unused elements left out
+    block = LinearDynamics(creep=((0.3, 0.37),))  # one large element, its time constant off the start's ladder
+    fitted = identify("prandtl-ishlinskii", u, record(u, 1), DT, creep="kelvin-voigt", alignment="next")
+    assert np.sqrt(np.mean((fitted.predict(u_val) - record(u_val, 2)) ** 2)) < 1.1 * 0.01
+    share, tau = max(fitted.dynamics.creep)  # its twins merged into one element
+    assert abs(share / 0.3 - 1) < 0.03 and abs(tau / 0.37 - 1) < 0.03, fitted.dynamics.creep
     assert identify("kp", u, record(u, 1), DT, creep="kelvin-voigt").dynamics.creep
+    assert identify("fckp", u, record(u, 1), DT, creep="kelvin-voigt").dynamics.creep  # after its own
     with pytest.raises(ValueError, match="creep 'maxwell'; allowed: grunwald-letnikov, kelvin-voigt"):
         identify("kp", u, u, DT, creep="maxwell")
 

@@ -41,7 +41,8 @@ def add_parser(sub) -> None:
     p_id.add_argument("--creep", nargs="?", const=True, default=False, metavar="FORM",
                       help="fit a creep after the hysteresis too: grunwald-letnikov (a fractional integral; not "
                       "for kp or power-function) or kelvin-voigt (first-order elements in the linear block, any "
-                      "family; the controller generates in C); --creep alone: grunwald-letnikov (fckp has its own)")
+                      "family, fckp too after its own; the controller generates in C); --creep alone: "
+                      "grunwald-letnikov (fckp has its own)")
     p_id.add_argument("--units", default="", help="output units, recorded in the model document (e.g. um)")
     p_id.add_argument("--input-units", default="", help="input units (e.g. V)")
     p_id.add_argument("--data-file", dest="bench_data", metavar="FILE",
@@ -73,6 +74,11 @@ def command(args) -> int:
     int
         0, or 1 when the fit gives no finite result; bad usage or input raises ``UsageError`` (exit 2).
     """
+    from hystmpc.models.identification import CREEP_FORMS
+    if isinstance(args.creep, str) and args.creep not in CREEP_FORMS:
+        raise UsageError(f"--creep {args.creep!r}: not a creep form; allowed: {', '.join(CREEP_FORMS)} (--creep "
+                         "alone: grunwald-letnikov; if that was the family or the record, put --creep after them "
+                         "or write --creep=FORM)")
     if args.family in IDENTIFIABLE:
         return _identify_bench(args)
     if args.family in all_bench_names():
