@@ -34,7 +34,7 @@ from hystmpc.models.families import (
 )
 from hystmpc.models.fit_plays import prandtl_ishlinskii_problem, preisach_problem
 from hystmpc.models.linear_dynamics import LinearDynamics
-from hystmpc.models.record_fit import ALIGNMENTS, Record, respond, tidy_creep
+from hystmpc.models.record_fit import ALIGNMENTS, FASTEST_CREEP, Record, respond, tidy_creep
 
 __all__ = ["CREEP_FORMS", "DEFAULT_CREEP", "FAMILIES", "MIN_SAMPLES", "OFFSET_KEYS", "Family", "FitError",
            "Identified", "build_hysteresis", "check_alignment", "check_data", "choose_alignment", "compiled_response",
@@ -375,6 +375,9 @@ def identify(name: str, u, y, sample_period: float, options: dict | None = None,
         raise ValueError(f"{name} takes no Grünwald–Letnikov creep; "
                          f"{'fckp is kp with it' if name == 'kp' else 'fit it without'}, or --creep kelvin-voigt")
     u, y = check_data(u, y, sample_period)
+    if creep == "kelvin-voigt" and len(u) < FASTEST_CREEP:
+        raise ValueError(f"a Kelvin–Voigt creep needs a record of at least {FASTEST_CREEP} samples (its elements are "
+                         f"slower than that); the record has {len(u)}")
     check_alignment(alignment)
     if dynamics not in KINDS:
         raise ValueError(f"dynamics {dynamics!r} is not one of {', '.join(KINDS)}")

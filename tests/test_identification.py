@@ -213,6 +213,8 @@ def test_a_kelvin_voigt_creep_is_fitted_with_any_family():
     assert identify("fckp", u, record(u, 1), DT, creep="kelvin-voigt").dynamics.creep  # after its own
     with pytest.raises(ValueError, match="creep 'maxwell'; allowed: grunwald-letnikov, kelvin-voigt"):
         identify("kp", u, u, DT, creep="maxwell")
+    with pytest.raises(ValueError, match="needs a record of at least 100 samples .* the record has 99"):
+        identify("kp", u[:99], u[:99], DT, creep="kelvin-voigt")
 
 
 def test_model_document_round_trip(tmp_path):
