@@ -425,20 +425,25 @@ class ActuatorSpec:
                                   creep_order=creep_order)
 
     def runner_up(self) -> dict | None:
-        """The ranking's row of the second family, with its model document.
+        """The ranking's second row, with its model document.
+
+        A row that is the model's family with or without the model's creep is passed over: it
+        differs from the model by the creep alone, not as another model of the record does.
 
         Returns
         -------
         dict or None
-            The ``identify auto`` ranking's second row (None when the document has no ranking
-            with a second family).
+            The ``identify auto`` ranking's second row so counted (None when the document has no
+            ranking with one).
         """
         candidates = self._document.get("candidates")
         if not isinstance(candidates, list):
             return None
         rows = [c for c in candidates if isinstance(c, dict) and isinstance(c.get("model"), dict)
                 and isinstance(c.get("distance_to_best"), int | float)]
-        return rows[1] if len(rows) > 1 else None
+        best = rows[0] if rows else {}
+        others = [c for c in rows[1:] if c.get("family") != best.get("family") or c.get("creep") == best.get("creep")]
+        return others[0] if others else None
 
     def runner_up_weight(self) -> float:
         """How far the ``runner-up`` plant moves from the model toward the runner-up, in [0, 1].

@@ -165,7 +165,8 @@ def _candidate(c, units: dict | None = None) -> dict:
     With ``units``, it holds the candidate's own model document under ``"model"`` (an actuator
     file's simulated plant may be the runner-up).
     """
-    row = {"family": c.family, "fit_rmse": c.fit_rmse, "validation_rmse": c.validation_rmse,
+    row = {"family": c.family, **({"creep": c.creep} if c.creep else {}), "fit_rmse": c.fit_rmse,
+           "validation_rmse": c.validation_rmse,
            "seconds": round(c.seconds, 2)}
     if c.identified is not None:
         row["alignment"] = c.identified.alignment
@@ -221,13 +222,13 @@ def ranking_table(ranking, units: str) -> str:
     unit = f" [{units}]" if units else ""
     naive = ranking.naive.validation_rmse
     lines = [f"validation on {ranking.validation}",
-             f"{'family':26s} {'fit RMSE' + unit:>16s} {'validation' + unit:>16s} {'vs linear+lag':>14s} {'time':>7s}"]
+             f"{'family':32s} {'fit RMSE' + unit:>16s} {'validation' + unit:>16s} {'vs linear+lag':>14s} {'time':>7s}"]
     for c in [*ranking.candidates, ranking.naive]:
         if c.error:
-            lines.append(f"{c.family:26s} {'failed: ' + c.error}")
+            lines.append(f"{c.label:32s} {'failed: ' + c.error}")
             continue
         ratio = c.validation_rmse / naive if naive > 0 else float("nan")
-        lines.append(f"{c.family:26s} {c.fit_rmse:16.4g} {c.validation_rmse:16.4g} {ratio:14.3f} {c.seconds:6.1f}s")
+        lines.append(f"{c.label:32s} {c.fit_rmse:16.4g} {c.validation_rmse:16.4g} {ratio:14.3f} {c.seconds:6.1f}s")
     return "\n".join(lines)
 
 

@@ -39,7 +39,7 @@ from hystmpc.models.record_fit import ALIGNMENTS, FASTEST_CREEP, Record, respond
 __all__ = ["CREEP_FORMS", "DEFAULT_CREEP", "FAMILIES", "MIN_SAMPLES", "OFFSET_KEYS", "Family", "FitError",
            "Identified", "build_hysteresis", "check_alignment", "check_data", "choose_alignment", "compiled_response",
            "creep_form", "family", "fit_options", "hysteresis_output", "identify", "require_resonance",
-           "shows_resonance"]
+           "shows_resonance", "takes_creep"]
 
 MIN_SAMPLES = 50
 """Fewer samples than this are refused: no family can be told from noise on less."""
@@ -146,6 +146,27 @@ CREEP_FORMS = ("grunwald-letnikov", "kelvin-voigt")
 first-order (Kelvin–Voigt) elements in the linear block."""
 DEFAULT_CREEP = "grunwald-letnikov"
 """The form ``creep=True`` (``--creep`` alone) fits."""
+
+
+def takes_creep(name: str, form: str) -> bool:
+    """Whether family ``name`` can be fitted with the creep form ``form``.
+
+    kp and power-function take no Grünwald–Letnikov creep (fckp is kp with it); every family
+    takes a Kelvin–Voigt one.
+
+    Parameters
+    ----------
+    name : str
+        The family.
+    form : str
+        One of :data:`CREEP_FORMS`.
+
+    Returns
+    -------
+    bool
+        True when :func:`identify` fits it.
+    """
+    return not (form == "grunwald-letnikov" and name in ("kp", "power-function"))
 
 
 def creep_form(creep: bool | str | None) -> str | None:
@@ -371,7 +392,7 @@ def identify(name: str, u, y, sample_period: float, options: dict | None = None,
     from hystmpc.models.linear_dynamics import KINDS
     fam = family(name)
     creep = creep_form(creep)
-    if creep == "grunwald-letnikov" and name in ("kp", "power-function"):
+    if creep and not takes_creep(name, creep):
         raise ValueError(f"{name} takes no Grünwald–Letnikov creep; "
                          f"{'fckp is kp with it' if name == 'kp' else 'fit it without'}, or --creep kelvin-voigt")
     u, y = check_data(u, y, sample_period)

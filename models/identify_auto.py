@@ -8,6 +8,9 @@ model an engineer would try first: a straight line through a first-order lag and
 (:func:`naive_model`), fitted to the same samples.
 
 The families run in parallel processes (``workers``), each as :func:`hystmpc.models.identification.identify`.
+Asked for a creep, each family is fitted with and without it and both are ranked: a creep is a
+choice the validation makes, as the family is (on a record whose drift is not creep, a creep
+fitted to it costs more on validation than it gains on the fit).
 """
 
 from __future__ import annotations
@@ -24,8 +27,10 @@ from hystmpc.models.identification import (
     Identified,
     check_data,
     choose_alignment,
+    creep_form,
     identify,
     require_resonance,
+    takes_creep,
 )
 from hystmpc.models.linear_dynamics import LinearDynamics
 from hystmpc.models.record_fit import Record, fit_block, refine, respond
@@ -52,6 +57,13 @@ class Candidate:
     distance_to_best: float = float("nan")
     """RMS difference of its validation prediction from the best candidate's (output units):
     how far apart two models of the same record are."""
+    creep: str = ""
+    """The creep form fitted with the family (empty: none)."""
+
+    @property
+    def label(self) -> str:
+        """The family, and its creep form where it has one (``preisach + kelvin-voigt``)."""
+        return f"{self.family} + {self.creep}" if self.creep else self.family
 
 
 @dataclass
@@ -196,18 +208,19 @@ def _one_blas_thread() -> None:
 
 def _one(job) -> Candidate:
     name, u, y, sample_period, options, kw, validation, continue_state, warm_up = job
+    creep = kw["creep"] or ""
     start = time.perf_counter()
     try:
         identified = identify(name, u, y, sample_period, options, **kw)
         val = validation_rmse(identified, u, validation, continue_state, warm_up)
         if not np.isfinite(val):
             raise FitError(f"{name}: the validation RMSE is not finite (the model diverges on the validation record)")
-        return Candidate(name, identified, identified.rmse, val, time.perf_counter() - start)
+        return Candidate(name, identified, identified.rmse, val, time.perf_counter() - start, creep=creep)
     except (FitError, ValueError) as exc:
-        return Candidate(name, None, float("nan"), float("nan"), time.perf_counter() - start, str(exc))
+        return Candidate(name, None, float("nan"), float("nan"), time.perf_counter() - start, str(exc), creep=creep)
     except Exception as exc:  # noqa: BLE001 - one family's failure must not end the ranking of the others
         return Candidate(name, None, float("nan"), float("nan"), time.perf_counter() - start,
-                         f"{name}: {type(exc).__name__}: {exc}")
+                         f"{name}: {type(exc).__name__}: {exc}", creep=creep)
 
 
 def identify_auto(u, y, sample_period: float, validation: tuple | None = None, continue_state: bool = False,
@@ -230,6 +243,8 @@ def identify_auto(u, y, sample_period: float, validation: tuple | None = None, c
         Fit options per family name.
     dynamics, dynamics_data, max_delay, alignment, warm_up, creep
         As for :func:`hystmpc.models.identification.identify` (the resonance check runs once).
+        With a creep, every family is fitted with it and without it (one candidate each; not
+        with a form the family takes none of).
     workers : int, optional
         Families fitted at once, each in its own process.
 
@@ -255,10 +270,13 @@ def identify_auto(u, y, sample_period: float, validation: tuple | None = None, c
         fast = None if dynamics_data is None else check_data(*dynamics_data, sample_period, "dynamics data")
         require_resonance(u, y, sample_period, probe, range(max_delay + 1), warm_up, fast)
     names = sorted(families or FAMILIES, key=lambda name: -COST.get(name, 0))  # the longest first
+    form = creep_form(creep)
     kw = {"dynamics": dynamics, "dynamics_data": dynamics_data, "max_delay": max_delay, "alignment": alignment,
-          "warm_up": warm_up, "check_resonance": False, "creep": creep}
-    jobs = [(name, u, y, sample_period, (options or {}).get(name, {}), kw, validation, continue_state, warm_up)
-            for name in names]
+          "warm_up": warm_up, "check_resonance": False}
+    creeps = [form, None] if form else [None]  # the slower fits first
+    jobs = [(name, u, y, sample_period, (options or {}).get(name, {}), kw | {"creep": c}, validation,
+             continue_state, warm_up)
+            for c in creeps for name in names if c is None or takes_creep(name, c)]
     if workers > 1 and len(jobs) > 1:
         with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), initializer=_one_blas_thread) as pool:
             candidates = list(pool.map(_one, jobs))

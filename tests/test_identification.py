@@ -217,6 +217,31 @@ def test_a_kelvin_voigt_creep_is_fitted_with_any_family():
         identify("kp", u[:99], u[:99], DT, creep="kelvin-voigt")
 
 
+def test_identify_auto_ranks_each_family_with_and_without_the_creep():
+    """Asked for a creep, auto fits it and leaves it out, and the validation chooses; a family
+    that takes no creep of that form is ranked without it, not as a failure."""
+    from hystmpc.experiments.identify import _candidate
+    from hystmpc.models.identify_auto import identify_auto
+    truth = PrandtlIshlinskii(0.05, (13.0, 31.0), (0.04, 0.02))
+    block = LinearDynamics(creep=((0.05, 0.23), (0.04, 1.7)))
+    u, u_val = fit_input(0, 100, n=2000, levels=40), validation_input(0, 100)
+
+    def record(u, seed):
+        y = block.response(hysteresis_output(truth, 0.0, u, DT) + 0.2, DT, from_steady_state=True)
+        return y + 0.01 * np.random.default_rng(seed).standard_normal(len(u))
+    ranking = identify_auto(u, record(u, 1), DT, (u_val, record(u_val, 2)), families=["prandtl-ishlinskii"],
+                            creep="kelvin-voigt", alignment="next", workers=1)
+    with_creep, without = ranking.candidates
+    assert with_creep.label == "prandtl-ishlinskii + kelvin-voigt" and without.label == "prandtl-ishlinskii"
+    assert with_creep.validation_rmse < 1.1 * 0.01 < 3 * 0.01 < without.validation_rmse
+    assert _candidate(with_creep)["creep"] == "kelvin-voigt" and "creep" not in _candidate(without)
+    ranking = identify_auto(u, record(u, 1), DT, (u_val, record(u_val, 2)), families=["prandtl-ishlinskii", "kp"],
+                            creep="grunwald-letnikov", alignment="next", workers=1)
+    labels = sorted(c.label for c in ranking.candidates)
+    assert labels == ["kp", "prandtl-ishlinskii", "prandtl-ishlinskii + grunwald-letnikov"]
+    assert not any(c.error for c in ranking.candidates)
+
+
 def test_model_document_round_trip(tmp_path):
     fitted, _, _, _ = self_fit("parametric", "same")
     path = tmp_path / "model.json"

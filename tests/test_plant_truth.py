@@ -83,6 +83,20 @@ def test_a_runner_up_closer_than_the_models_error_is_taken_whole(tmp_path):
     assert spec.runner_up_weight() == 1.0
 
 
+def test_the_runner_up_is_not_the_model_with_its_creep_left_out(tmp_path):
+    """``identify auto --creep`` ranks each family with and without it: the model's own family
+    without its creep is passed over for the next row."""
+    path = _ranked_folder(tmp_path)
+    doc = json.loads((tmp_path / "piezo_model.json").read_text())
+    best, other = doc["candidates"]
+    best["creep"] = other["creep"] = "kelvin-voigt"  # the fixture's runner-up is of the model's family
+    twin = copy.deepcopy(best) | {"distance_to_best": 0.01}
+    del twin["creep"]
+    doc["candidates"] = [best, twin, other]
+    (tmp_path / "piezo_model.json").write_text(json.dumps(doc))
+    assert ActuatorSpec(path).runner_up()["distance_to_best"] == 0.3
+
+
 def test_truth_model_and_a_document_path_are_single_plants(tmp_path):
     path = _ranked_folder(tmp_path)
     shutil.copy(EXAMPLE / "piezo_model.json", tmp_path / "other.json")
