@@ -17,6 +17,10 @@ From one file hystmpc builds, for every command that takes a bench:
   relative ``mismatch``, with sensor noise, so that no controller runs on its own model;
 * two **scenarios** from the output range: ``sine`` and ``staircase``.
 
+The plants are built in :mod:`hystmpc.experiments.actuator_plants`, the controllers in
+:mod:`hystmpc.experiments.actuator_controllers` (both mixed into :class:`ActuatorSpec`); this
+module reads the file and puts the bench together.
+
 Groups for ``--set`` (and for optional tables of the same names in the file): ``plant``
 (mismatch, seed, noise, truth), ``model`` (``model.hysteresis.*``: the family's parameters;
 ``model.dynamics.*``), ``nmpc``, ``smoothing``, ``solver``, ``pid``, ``inverse_ff_pid``, ``lmpc``.
@@ -30,31 +34,25 @@ import logging
 import re
 import tomllib
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from hystmpc.experiments.actuator_groups import ActuatorModel, ActuatorPlant, parameter_class, perturb
+from hystmpc.experiments.actuator_controllers import ActuatorControllers
+from hystmpc.experiments.actuator_groups import ActuatorModel, ActuatorPlant, parameter_class
+from hystmpc.experiments.actuator_plants import ActuatorPlants
 from hystmpc.experiments.baselines import (
     FeedforwardPidGains,
-    InverseCompensation,
-    ModeNotch,
-    PidController,
     PidGains,
-    inverse_feedforward_pid,
 )
-from hystmpc.experiments.baselines.pid import NOTCH_DAMPING
 from hystmpc.experiments.bench import MULTIPLE_SHOOTING, SINGLE_SHOOTING, Bench, ControllerSpec
 from hystmpc.experiments.config import apply_values
 from hystmpc.experiments.runner import Scenario
-from hystmpc.experiments.tuning import tuned_baselines
 from hystmpc.models.document import dynamics_from, read_model_document
 from hystmpc.models.identification import build_hysteresis, hysteresis_output
 from hystmpc.models.linear_dynamics import KIND_KEYS
-from hystmpc.models.prediction import Smoothing, build_prediction_model
-from hystmpc.mpc import InputBounds, NmpcController, NmpcSettings, RtiSettings, SolverSettings
-from hystmpc.mpc.linear_mpc import InverseLinearMpc, LinearMpcSettings
-from hystmpc.plants.actuator import BlendedActuator, HysteresisActuator
+from hystmpc.models.prediction import Smoothing
+from hystmpc.mpc import NmpcSettings, RtiSettings, SolverSettings
+from hystmpc.mpc.linear_mpc import LinearMpcSettings
 
 LOG = logging.getLogger("hystmpc")
 _WARNED: set[str] = set()
@@ -77,7 +75,7 @@ KEYS = {"name", "description", "sample_period", "output_name", "units", "input_u
         "input_rate", "output_range", *TABLES, *GROUP_TABLES}
 
 
-class ActuatorSpec:
+class ActuatorSpec(ActuatorPlants, ActuatorControllers):
     """A parsed actuator file; :meth:`bench` makes the :class:`Bench`.
 
     Parameters
@@ -398,314 +396,6 @@ class ActuatorSpec:
             The exact hysteresis model and its creep order (0 without creep).
         """
         return build_hysteresis(self.family, dataclasses.asdict(model.hysteresis), self.sample_period)
-
-    def plant_of(self, model: ActuatorModel, noise: float, family: str | None = None) -> HysteresisActuator:
-        """The exact model (of the file's family, or ``family``) as a plant.
-
-        Parameters
-        ----------
-        model : ActuatorModel
-            Hysteresis parameters and dynamics.
-        noise : float
-            Sensor noise standard deviation (output units).
-        family : str, optional
-            The hysteresis family of ``model`` (default: the file's).
-
-        Returns
-        -------
-        HysteresisActuator
-            The plant, at rest at input 0 clipped into the input bounds.
-        """
-        hysteresis, creep_order = build_hysteresis(family or self.family, dataclasses.asdict(model.hysteresis),
-                                                   self.sample_period)
-        rest = float(np.clip(0.0, *self.input_bounds))
-        return HysteresisActuator(hysteresis, self.sample_period,
-                                  model.dynamics.discrete(self.sample_period, hold=creep_order > 0),
-                                  model.dynamics.delay_samples, noise, self.input_bounds, rest_input=rest,
-                                  creep_order=creep_order)
-
-    def runner_up(self) -> dict | None:
-        """The ranking's second row, with its model document.
-
-        A row that is the model's family with or without the model's creep is passed over: it
-        differs from the model by the creep alone, not as another model of the record does.
-
-        Returns
-        -------
-        dict or None
-            The ``identify auto`` ranking's second row so counted (None when the document has no
-            ranking with one).
-        """
-        candidates = self._document.get("candidates")
-        if not isinstance(candidates, list):
-            return None
-        rows = [c for c in candidates if isinstance(c, dict) and isinstance(c.get("model"), dict)
-                and isinstance(c.get("distance_to_best"), int | float)]
-        best = rows[0] if rows else {}
-        others = [c for c in rows[1:] if c.get("family") != best.get("family") or c.get("creep") == best.get("creep")]
-        return others[0] if others else None
-
-    def runner_up_weight(self) -> float:
-        """How far the ``runner-up`` plant moves from the model toward the runner-up, in [0, 1].
-
-        The weight is the model's validation error without the sensor noise, ``sqrt(v² − σ²)``,
-        over the two models' RMS distance on the validation record, so that the plant differs from
-        the model by what the model missed on the record.
-
-        Returns
-        -------
-        float
-            The weight; 1 when the document has no finite validation RMSE or the distance is 0.
-        """
-        row = self.runner_up()
-        validation = self._document.get("validation")
-        v = validation.get("rmse") if isinstance(validation, dict) else None
-        if not isinstance(v, int | float) or not np.isfinite(v):
-            return 1.0  # no measured error to scale by: the runner-up whole
-        error = np.sqrt(max(v**2 - self.noise**2, 0.0))
-        distance = float(row["distance_to_best"])
-        return float(min(1.0, error / distance)) if distance > 0 else 1.0
-
-    def truth(self, name: str) -> tuple[str, ActuatorModel] | None:
-        """``(family, model)`` of ``plant.truth`` before the perturbation.
-
-        It is the runner-up's model for ``runner-up``, a document's for a path, None for ``model``
-        (it follows the ``model`` group); ``ValueError`` naming what is wrong. A truth's dynamics
-        are the file's ``[dynamics]`` when it has one, else its document's.
-
-        Parameters
-        ----------
-        name : str
-            ``model``, ``runner-up`` or a model document's path (relative to the actuator file).
-
-        Returns
-        -------
-        tuple of (str, ActuatorModel) or None
-            The truth's family and model (read once, then kept).
-        """
-        if name == "model":
-            return None
-        if name not in self._truths:
-            if name == "runner-up":
-                row = self.runner_up()
-                if row is None:
-                    raise ValueError("plant.truth = 'runner-up' needs a model document written by identify auto with a "
-                                     "second family ranked; allowed here: model, or a model document's path")
-                source = row["model"]
-            else:
-                source = (self.path.parent / name).resolve()
-                if source.suffix != ".json":
-                    raise ValueError(f"plant.truth = {name!r}: allowed: runner-up, model, or a model document's path "
-                                     "(.json)")
-            try:
-                identified = read_model_document(source, self.sample_period)
-            except ValueError as exc:
-                raise ValueError(f"plant.truth = {name!r}: {exc}") from None
-            cls = parameter_class(identified.family, self.model_parameters(identified), self.sample_period)
-            dynamics = self.dynamics if "dynamics" in self.raw else identified.dynamics
-            self._truths[name] = (identified.family, ActuatorModel(cls(), dynamics))
-        return self._truths[name]
-
-    def make_plant(self, config: dict):
-        """The simulated truth, perturbed by ``plant.mismatch``, with the sensor noise.
-
-        For ``plant.truth = runner-up`` it is the ``model`` group and the runner-up in parallel,
-        blended by :meth:`runner_up_weight`; else the truth's model (:meth:`truth`; the ``model``
-        group for ``model``).
-
-        Parameters
-        ----------
-        config : dict
-            Parameter groups (``plant`` and ``model`` are read).
-
-        Returns
-        -------
-        HysteresisActuator or BlendedActuator
-            The plant.
-        """
-        plant: ActuatorPlant = config["plant"]
-        nominal = perturb(config["model"], self.family, plant.mismatch, plant.seed)
-        truth = self.truth(plant.truth)
-        if truth is None:
-            return self.plant_of(nominal, plant.noise)
-        family, model = truth
-        other = perturb(model, family, plant.mismatch, plant.seed)
-        if plant.truth != "runner-up":
-            return self.plant_of(other, plant.noise, family)
-        return BlendedActuator(self.plant_of(nominal, 0.0), self.plant_of(other, 0.0, family),
-                               self.runner_up_weight(), plant.noise)
-
-    def build_pid(self, config: dict, feedforward: bool, gains: PidGains | None = None):
-        """``pid`` or ``inverse-ff-pid`` on the ``model`` group.
-
-        Parameters
-        ----------
-        config : dict
-            Parameter groups.
-        feedforward : bool
-            Build ``inverse-ff-pid`` (the inverse hysteresis feed-forward), else ``pid``.
-        gains : PidGains, optional
-            The gains (default: the config's ``inverse_ff_pid`` or ``pid`` group).
-
-        Returns
-        -------
-        PidController
-            The controller.
-        """
-        model: ActuatorModel = config["model"]
-        gains = gains if gains is not None else config["inverse_ff_pid" if feedforward else "pid"]
-        notch = self.command_notch(model)
-        if not feedforward:
-            return PidController(gains, self.sample_period, self.input_bounds, rate=self.input_rate,
-                                 command_filter=notch)
-        hysteresis, _ = self.hysteresis(model)
-        return inverse_feedforward_pid(hysteresis, gains, self.sample_period, self.input_bounds,
-                                       preview=gains.preview, rate=self.input_rate, command_filter=notch)
-
-    def command_notch(self, model: ActuatorModel) -> ModeNotch | None:
-        """The PID baselines' notch on the command, where the model's mode is lightly damped.
-
-        A second-order block with damping below :data:`NOTCH_DAMPING` rings at every step
-        of the command, whatever the PID's gains; an engineer puts a notch at the mode in front
-        of such an actuator. The notch replaces the model's mode by one damped at
-        :data:`NOTCH_DAMPING` (:class:`~hystmpc.experiments.baselines.ModeNotch`).
-
-        Parameters
-        ----------
-        model : ActuatorModel
-            The ``model`` group.
-
-        Returns
-        -------
-        ModeNotch or None
-            The notch, or None (no second-order block, or one damped at least that much).
-        """
-        block = model.dynamics
-        if block.kind != "second-order" or block.damping >= NOTCH_DAMPING:
-            return None
-        return ModeNotch(block, self.sample_period, NOTCH_DAMPING)
-
-    def _estimator_noise(self) -> float:
-        """The sensor noise the NMPC's EKF and inverse-lmpc's Kalman filter are tuned for.
-
-        It is at least 0.1 % of the output range, so that a noise-free file still filters.
-        """
-        return max(self.noise, 1e-3 * (self.output_range[1] - self.output_range[0]))
-
-    def build_nmpc(self, config: dict) -> NmpcController:
-        """The NMPC on the smoothed model, EKF from the sensor noise, inverse warm start.
-
-        Parameters
-        ----------
-        config : dict
-            Parameter groups (``model``, ``smoothing``, ``nmpc``, ``solver``).
-
-        Returns
-        -------
-        NmpcController
-            The controller.
-        """
-        model: ActuatorModel = config["model"]
-        smoothing: Smoothing = config["smoothing"]
-        hysteresis, creep_order = self.hysteresis(model)
-        pm = build_prediction_model(hysteresis, self.sample_period,
-                                    dynamics=model.dynamics.discrete(self.sample_period, hold=creep_order > 0),
-                                    eps=smoothing.eps, direction_eps=smoothing.direction,
-                                    delay_samples=model.dynamics.delay_samples, creep_order=creep_order)
-        bounds = InputBounds(*self.input_bounds, self.input_rate)
-        noise = self._estimator_noise()
-        return NmpcController(pm, bounds, config["nmpc"], config["solver"], sensor_noise=noise)
-
-    def build_inverse_lmpc(self, config: dict, settings: LinearMpcSettings | None = None) -> InverseLinearMpc:
-        """``inverse-lmpc`` on the ``model`` group: the exact inverse hysteresis and a linear MPC.
-
-        The exact inverse hysteresis in series with the input (its memory follows the inputs sent)
-        turns a virtual input ``v`` into the input; a linear MPC with an input disturbance
-        (offset-free; creep lands in it) controls the linear block and dead time from ``v``.
-
-        Parameters
-        ----------
-        config : dict
-            Parameter groups.
-        settings : LinearMpcSettings, optional
-            The linear MPC's settings (default: the config's ``lmpc`` group).
-
-        Returns
-        -------
-        InverseLinearMpc
-            The controller.
-        """
-        model: ActuatorModel = config["model"]
-        hysteresis, _ = self.hysteresis(model)
-        linear = model.dynamics.virtual_input_model(self.sample_period)
-        noise = self._estimator_noise()
-        n_block = linear.nx - model.dynamics.delay_samples
-        # as the NMPC's EKF (DisturbanceEKF.from_sensor_noise); the queue of virtual inputs is known exactly
-        process = [(0.01 * noise) ** 2] * n_block + [1e-12 * noise**2] * model.dynamics.delay_samples + [noise**2]
-        initial = [(10 * noise) ** 2] * n_block + [1e-12 * noise**2] * model.dynamics.delay_samples + \
-            [(1000 * noise) ** 2]
-        return InverseLinearMpc(
-            linear, InverseCompensation(hysteresis, sensors=("y",),
-                                        rest_input=float(np.clip(0.0, *self.input_bounds))),  # the plant's
-            InputBounds(*self.input_bounds, self.input_rate), settings or config["lmpc"], process_noise=process,
-            measurement_noise=[noise**2], initial_state=lambda z: np.concatenate(
-                (model.dynamics.rest_state(z[0]), np.full(model.dynamics.delay_samples, z[0]))),
-            initial_covariance=initial)
-
-    def tuned_gains(self, config: dict) -> dict[str, Any]:
-        """Both PID baselines' gains, ``inverse-ff-pid``'s preview and ``inverse-lmpc``'s rate weight.
-
-        The gains come from :func:`hystmpc.experiments.tuning.tune_pid` on the nominal ``model``
-        group. For ``inverse-ff-pid`` also its preview: of dead time + one sample + the block's
-        lag and its two neighbours, the one with the best point of the coarse gain grid, before
-        the gains are tuned at it. For ``inverse-lmpc`` its rate weight
-        (:func:`hystmpc.experiments.tuning.tuned_baselines`).
-
-        Tuning runs many closed loops, so the result is kept in memory and on disk
-        (:func:`hystmpc.mpc.codegen.user_cache_dir`), keyed by everything it depends on.
-
-        Parameters
-        ----------
-        config : dict
-            Parameter groups before tuning (``model`` and ``lmpc`` are read).
-
-        Returns
-        -------
-        dict
-            ``pid`` (PidGains), ``inverse_ff_pid`` (FeedforwardPidGains) and ``lmpc``
-            (LinearMpcSettings).
-        """
-        model = config["model"]
-        key = repr(model)
-        if key not in self._tuned:
-            self._tuned[key] = tuned_baselines(self, model, config)
-        return self._tuned[key]
-
-    def tuning_ensemble(self, model: ActuatorModel, noise: float) -> list:
-        """The plants the baselines are tuned on: what the identification knows of the model's error.
-
-        They are the ``model`` group exact, and where the document ranks a runner-up the
-        ``runner-up`` plant unperturbed (the model moved toward the runner-up by
-        :meth:`runner_up_weight`).
-
-        Parameters
-        ----------
-        model : ActuatorModel
-            The ``model`` group.
-        noise : float
-            Sensor noise standard deviation of the plants (output units).
-
-        Returns
-        -------
-        list
-            One or two plants.
-        """
-        plants = [self.plant_of(model, noise)]
-        if self.runner_up() is not None:
-            family, other = self.truth("runner-up")
-            plants.append(BlendedActuator(self.plant_of(model, 0.0), self.plant_of(other, 0.0, family),
-                                          self.runner_up_weight(), noise))
-        return plants
 
     def scenarios(self) -> dict[str, Scenario]:
         """``sine`` and ``staircase`` over the output range, from the output at rest.

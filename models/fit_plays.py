@@ -21,7 +21,8 @@ from __future__ import annotations
 import numpy as np
 
 from hystmpc.models.preisach import cell_ramps
-from hystmpc.models.record_fit import Problem, Record, project, respond
+from hystmpc.models.projection import project
+from hystmpc.models.record_fit import Problem, Record, respond
 
 LADDER_DENSITY = 5
 """Candidate thresholds per play of the dense start ladder."""

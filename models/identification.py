@@ -22,6 +22,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from hystmpc.models.block_fit import fit_block
+from hystmpc.models.block_parameters import FASTEST_CREEP, creep_start, tidy_creep
 from hystmpc.models.families import (
     FAMILIES,
     OFFSET_KEYS,
@@ -32,14 +34,14 @@ from hystmpc.models.families import (
     fit_options,
     hysteresis_output,
 )
-from hystmpc.models.fit_plays import prandtl_ishlinskii_problem, preisach_problem
+from hystmpc.models.fit_plays import preisach_problem
 from hystmpc.models.linear_dynamics import LinearDynamics
-from hystmpc.models.record_fit import ALIGNMENTS, FASTEST_CREEP, Record, respond, tidy_creep
+from hystmpc.models.record_fit import ALIGNMENTS, Record, evaluate, refine, respond, with_creep
+from hystmpc.models.resonance import require_resonance
 
 __all__ = ["CREEP_FORMS", "DEFAULT_CREEP", "FAMILIES", "MIN_SAMPLES", "OFFSET_KEYS", "Family", "FitError",
            "Identified", "build_hysteresis", "check_alignment", "check_data", "choose_alignment", "compiled_response",
-           "creep_form", "family", "fit_options", "hysteresis_output", "identify", "require_resonance",
-           "shows_resonance", "takes_creep"]
+           "creep_form", "family", "fit_options", "hysteresis_output", "identify", "takes_creep"]
 
 MIN_SAMPLES = 50
 """Fewer samples than this are refused: no family can be told from noise on less."""
@@ -215,7 +217,6 @@ def choose_alignment(u, y, sample_period: float, warm_up: int = 0) -> str:
     str
         ``next`` or ``same``, the one with the lower RMSE.
     """
-    from hystmpc.models.record_fit import evaluate
     rmse = {}
     for alignment in ALIGNMENTS:
         record = Record(np.asarray(u, float), np.asarray(y, float), sample_period, alignment, warm_up)
@@ -231,7 +232,6 @@ def _static_fit(fam: Family, record: Record, options: dict, other: str | None, c
     shares moved). With ``other``, the other row alignment gets a short refinement from the fit
     and replaces it if it does better.
     """
-    from hystmpc.models.record_fit import creep_start, refine, with_creep
     problem = fam.problem(record, **options)
     if creep == "grunwald-letnikov":
         problem = with_creep(problem, record)
@@ -257,7 +257,6 @@ def _joint(problem, record: Record, fit, kind: str, delays, fast: Record | None,
     Returns the fit and the dynamics' own RMSE on the record they were fitted on (None without a
     block).
     """
-    from hystmpc.models.record_fit import evaluate, fit_block, refine
     if kind == "none":
         return fit, None
     if fast is None:
@@ -278,72 +277,6 @@ def _joint(problem, record: Record, fit, kind: str, delays, fast: Record | None,
     model, creep_order = static.hysteresis()
     block, rmse = fit_block(hysteresis_output(model, creep_order, fast.u, fast.sample_period), fast, kind, delays)
     return refine(problem, record, replace(block, creep=fit.block.creep), move_block=False), rmse  # the creep: slow
-
-
-def shows_resonance(u, y, sample_period: float, alignment: str, delays, warm_up: int = 0) -> tuple[bool, str]:
-    """Whether a record shows a second-order block's resonance: ``(shows, why)``.
-
-    The second-order fit must beat the first-order one by 2 % in RMSE (on a Prandtl–Ishlinskii
-    start).
-
-    Parameters
-    ----------
-    u, y : array_like
-        The record.
-    sample_period : float
-        Sample period (s).
-    alignment : str
-        ``next`` or ``same``.
-    delays : sequence of int
-        Dead times tried (samples).
-    warm_up : int, optional
-        Leading samples left out of the fits.
-
-    Returns
-    -------
-    shows : bool
-        Whether the second-order block wins.
-    why : str
-        Both blocks' RMSE and the second-order one's frequency and damping, for a message.
-    """
-    from hystmpc.models.record_fit import fit_block, refine
-    record = Record(np.asarray(u, float), np.asarray(y, float), sample_period, alignment, warm_up)
-    problem = prandtl_ishlinskii_problem(record, 10)
-    fit = refine(problem, record, LinearDynamics(), move_block=False, iterations=10)
-    h = problem.columns(fit.theta) @ fit.weights
-    second, rmse2 = fit_block(h, record, "second-order", delays)
-    _, rmse1 = fit_block(h, record, "first-order", delays)
-    why = (f"a second-order block ({second.natural_frequency_hz:.4g} Hz, damping {second.damping:.3g}) fits it to "
-           f"{rmse2:.4g} against {rmse1:.4g} for a first-order lag")
-    return rmse2 < 0.98 * rmse1, why
-
-
-def require_resonance(u, y, sample_period: float, alignment: str, delays, warm_up: int = 0,
-                      fast: tuple | None = None) -> None:
-    """``ValueError`` unless the record shows a second-order block's resonance.
-
-    The test is :func:`shows_resonance`.
-
-    Parameters
-    ----------
-    u, y : array_like
-        The record.
-    sample_period : float
-        Sample period (s).
-    alignment : str
-        ``next`` or ``same``.
-    delays : sequence of int
-        Dead times tried (samples).
-    warm_up : int, optional
-        Leading samples of ``(u, y)`` left out (not applied to ``fast``).
-    fast : tuple of array_like, optional
-        ``(u, y)`` of the dynamics record: checked instead of ``(u, y)`` when given.
-    """
-    shows, why = shows_resonance(*(fast or (u, y)), sample_period, alignment, delays, 0 if fast else warm_up)
-    if not shows:
-        raise ValueError(f"the {'dynamics ' if fast else ''}record is too slow to show a resonance: {why}; fit "
-                         "--dynamics second-order on a record that excites it (--dynamics-data FAST.csv: steps or a "
-                         "chirp up to the resonance), or use --dynamics first-order")
 
 
 def identify(name: str, u, y, sample_period: float, options: dict | None = None, dynamics: str = "none",

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hystmpc.models.block_fit import fit_block
 from hystmpc.models.identification import (
     FAMILIES,
     FitError,
@@ -29,11 +30,11 @@ from hystmpc.models.identification import (
     choose_alignment,
     creep_form,
     identify,
-    require_resonance,
     takes_creep,
 )
 from hystmpc.models.linear_dynamics import LinearDynamics
-from hystmpc.models.record_fit import Record, fit_block, refine, respond
+from hystmpc.models.record_fit import Record, refine, respond
+from hystmpc.models.resonance import require_resonance
 
 HOLD_OUT = 0.3
 """Share of the record held out for validation when no validation record is given."""

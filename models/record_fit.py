@@ -14,6 +14,10 @@ the family says) and ``c`` follow from a small constrained least-squares problem
 (variable projection). Columns are computed in groups, each depending on a few entries of
 ``θ`` (one play's threshold), and cached, so a finite-difference step re-simulates one group.
 
+The block's parameter vector and its creep are in :mod:`hystmpc.models.block_parameters`, the
+projection in :mod:`hystmpc.models.projection`, the search for a block and dead time behind
+one hysteresis output in :mod:`hystmpc.models.block_fit`.
+
 Row alignment: ``next`` (a sampled control loop: ``y_k`` is measured before ``u_k`` acts, so a
 static model gives ``y_{k+1} = H[u]_k``) or ``same`` (a quasi-static loop tracer: ``y_k = H[u]_k``).
 """
@@ -25,8 +29,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from hystmpc.models.block_parameters import MOST_CREEP, block_bounds, block_of, block_theta
 from hystmpc.models.fractional import creep_integral
 from hystmpc.models.linear_dynamics import LinearDynamics
+from hystmpc.models.projection import project_normal
 
 ALIGNMENTS = ("next", "same")
 COST_ROWS = 6_000
@@ -71,160 +77,6 @@ class Record:
         return rows
 
 
-# ----- the linear block -------------------------------------------------------------------------------
-
-MOST_CREEP = 0.95
-"""Largest share of the output a fitted creep may take, all elements together."""
-FASTEST_CREEP = 100
-"""Shortest time constant of a fitted creep element (samples): a creep is slow; a faster
-element would take a share of the block's lag or dead time."""
-
-
-def block_theta(block: LinearDynamics) -> np.ndarray:
-    """The block's parameters as the refinement moves them.
-
-    Parameters
-    ----------
-    block : LinearDynamics
-        The linear block.
-
-    Returns
-    -------
-    ndarray
-        ``[log time_constant]`` (first-order), ``[log natural_frequency_hz, log damping]``
-        (second-order) or empty, then the creep elements' shares and the logarithms of their
-        time constants.
-    """
-    creep = [share for share, _ in block.creep] + [np.log(tau) for tau in block.creep_times]
-    if block.kind == "first-order":
-        return np.array([np.log(block.time_constant), *creep])
-    if block.kind == "second-order":
-        return np.array([np.log(block.natural_frequency_hz), np.log(block.damping), *creep])
-    return np.array(creep, float)
-
-
-def block_bounds(kind: str, sample_period: float, creep_elements: int = 0) -> tuple[list[float], list[float]]:
-    """Search bounds of :func:`block_theta`.
-
-    A lag between a tenth of a sample and 1e4 s; a resonance below Nyquist with a damping from
-    0.007 to 7; each creep share from 0 to :data:`MOST_CREEP` (:func:`block_of` scales them
-    down together where they sum beyond it), each creep time constant from :data:`FASTEST_CREEP`
-    samples (faster is the block's business) to 1e4 s.
-
-    Parameters
-    ----------
-    kind : str
-        Block kind (``"none"``, ``"first-order"``, ``"second-order"``).
-    sample_period : float
-        Sample period (s).
-    creep_elements : int, optional
-        Number of creep elements.
-
-    Returns
-    -------
-    tuple of list
-        ``(lower, upper)``, one entry per parameter of :func:`block_theta`.
-    """
-    m = creep_elements
-    fastest = np.log(FASTEST_CREEP * sample_period)
-    lower_c, upper_c = [0.0] * m + [fastest] * m, [MOST_CREEP] * m + [np.log(1e4)] * m
-    if kind == "first-order":
-        return [np.log(sample_period / 10), *lower_c], [np.log(1e4), *upper_c]
-    if kind == "second-order":
-        return [np.log(1e-3), -5.0, *lower_c], [np.log(0.5 / sample_period), 2.0, *upper_c]
-    return lower_c, upper_c
-
-
-def block_of(kind: str, theta, delay: int, creep_elements: int = 0) -> LinearDynamics:
-    """The block of :func:`block_theta` values.
-
-    Parameters
-    ----------
-    kind : str
-        Block kind (``"none"``, ``"first-order"``, ``"second-order"``).
-    theta : array_like
-        Its parameters as :func:`block_theta` gives them.
-    delay : int
-        Dead time (samples).
-    creep_elements : int, optional
-        Number of creep elements: their shares (scaled down together where they sum beyond
-        :data:`MOST_CREEP`) and log time constants are the last entries of ``theta``.
-
-    Returns
-    -------
-    LinearDynamics
-        The block.
-    """
-    m = creep_elements
-    theta = np.asarray(theta, float)
-    main, shares, log_taus = theta[:len(theta) - 2 * m], theta[len(theta) - 2 * m:len(theta) - m], \
-        theta[len(theta) - m:]
-    if m and np.sum(shares) > MOST_CREEP:
-        shares = shares * (MOST_CREEP / np.sum(shares))
-    creep = tuple((float(share), float(np.exp(log_tau))) for share, log_tau in zip(shares, log_taus, strict=True))
-    if kind == "first-order":
-        return LinearDynamics("first-order", time_constant=float(np.exp(main[0])), delay_samples=delay, creep=creep)
-    if kind == "second-order":
-        return LinearDynamics("second-order", natural_frequency_hz=float(np.exp(main[0])),
-                              damping=float(np.exp(main[1])), delay_samples=delay, creep=creep)
-    return LinearDynamics("none", delay_samples=delay, creep=creep)
-
-
-def creep_start(record: Record, elements: int = 8) -> tuple[tuple[float, float], ...]:
-    """Kelvin–Voigt creep elements to start a fit from.
-
-    Time constants from the record's length down by a factor √10 each, no shorter than
-    :data:`FASTEST_CREEP` samples, at most ``elements``; shares 0.01.
-
-    Parameters
-    ----------
-    record : Record
-        The record (its length and sample period).
-    elements : int, optional
-        Most elements.
-
-    Returns
-    -------
-    tuple
-        ``((share, time_constant), ...)``, the longest first.
-    """
-    duration = record.sample_period * len(record.u)
-    taus = [duration / np.sqrt(10.0) ** k for k in range(elements)]
-    return tuple((0.01, float(tau)) for tau in taus if tau >= FASTEST_CREEP * record.sample_period)
-
-
-def tidy_creep(creep, least_share: float = 1e-6, ratio: float = 1.25) -> tuple[tuple[float, float], ...]:
-    """Fitted creep elements without those the record did not need, and with near twins merged.
-
-    An element with a share below ``least_share`` is left out; elements whose time constants
-    lie within ``ratio`` of each other become one, with their shares summed and the
-    share-weighted geometric mean of their time constants (one state instead of several).
-
-    Parameters
-    ----------
-    creep : sequence of (float, float)
-        ``(share, time_constant)`` pairs.
-    least_share : float, optional
-        Smallest share kept.
-    ratio : float, optional
-        Time constants closer than this factor merge.
-
-    Returns
-    -------
-    tuple
-        The elements, the shortest time constant first.
-    """
-    kept = sorted(((float(s), float(t)) for s, t in creep if s >= least_share), key=lambda e: e[1])
-    merged: list[tuple[float, float]] = []
-    for share, tau in kept:
-        if merged and tau < ratio * merged[-1][1]:
-            s0, t0 = merged[-1]
-            merged[-1] = (s0 + share, float(np.exp((s0 * np.log(t0) + share * np.log(tau)) / (s0 + share))))
-        else:
-            merged.append((share, tau))
-    return tuple(merged)
-
-
 def respond(columns: np.ndarray, block: LinearDynamics, record: Record) -> np.ndarray:
     """What the sensor reads, row by row, for hysteresis outputs ``columns`` (one signal per column).
 
@@ -254,117 +106,6 @@ def respond(columns: np.ndarray, block: LinearDynamics, record: Record) -> np.nd
     if record.alignment == "same":
         out = out[1:]
     return out[:, 0] if flat else out
-
-
-# ----- the projection ---------------------------------------------------------------------------------
-
-def project(F: np.ndarray, y: np.ndarray, nonneg: np.ndarray, penalty: np.ndarray | None = None,
-            intercept: bool = True) -> tuple[np.ndarray, float]:
-    """Weights ``w`` and offset ``c`` minimising ``|y − F w − c|² + |penalty w|²``.
-
-    Parameters
-    ----------
-    F : ndarray
-        Columns, ``(n_rows, p)``.
-    y : ndarray
-        Target, one value per row.
-    nonneg : ndarray
-        Per column (bool): its weight is constrained to >= 0.
-    penalty : ndarray, optional
-        Penalty rows, ``(m, p)``, or None.
-    intercept : bool, optional
-        Fit the offset ``c``; ``c = 0`` without it.
-
-    Returns
-    -------
-    tuple
-        ``(w, c)``: the weights (ndarray) and the offset (float).
-    """
-    return project_normal(F.T @ F, F.T @ y, F.sum(axis=0), float(np.sum(y)), len(y), nonneg, penalty, intercept)
-
-
-def project_normal(FtF, Fty, sum_f, sum_y: float, n: int, nonneg: np.ndarray, penalty: np.ndarray | None = None,
-                   intercept: bool = True) -> tuple[np.ndarray, float]:
-    """:func:`project` from the normal equations' pieces.
-
-    The refinement keeps these pieces per group of columns.
-
-    Parameters
-    ----------
-    FtF : ndarray
-        ``FᵀF``.
-    Fty : ndarray
-        ``Fᵀy``.
-    sum_f : ndarray
-        ``Σ_rows F``, one sum per column.
-    sum_y : float
-        ``Σ y``.
-    n : int
-        Number of rows.
-    nonneg : ndarray
-        Per column (bool): its weight is constrained to >= 0.
-    penalty : ndarray, optional
-        Penalty rows, ``(m, p)``, or None.
-    intercept : bool, optional
-        Fit the offset ``c``; ``c = 0`` without it.
-
-    Returns
-    -------
-    tuple
-        ``(w, c)``: the weights (ndarray) and the offset (float), as :func:`project` gives them.
-    """
-    from scipy.linalg import cho_solve, solve_triangular
-    from scipy.optimize import nnls
-
-    if len(Fty) == 0:
-        return np.zeros(0), sum_y / n if intercept else 0.0
-    mean_f, mean_y = (sum_f / n, sum_y / n) if intercept else (np.zeros(len(Fty)), 0.0)
-    G = FtF - n * np.outer(mean_f, mean_f)
-    b = Fty - n * mean_f * mean_y
-    norm = np.sqrt(np.maximum(np.diag(G), 0.0))
-    top = max(float(np.max(norm)), 1e-300)
-    scale = np.where(norm > 1e-7 * top, norm, top)  # a column the record leaves constant: left to the penalty
-    G = G / np.outer(scale, scale)
-    b = b / scale
-    if penalty is not None and len(penalty):
-        P = penalty / scale
-        G = G + P.T @ P
-    factor = _factor(G)
-    if not np.any(nonneg):
-        v = cho_solve(factor, b)
-    else:
-        R = np.triu(factor[0])
-        target = solve_triangular(R, b, trans="T")
-        free = ~nonneg
-        if np.any(free):  # free weights: two non-negative halves
-            R2 = np.hstack((R, -R[:, free]))
-            v2 = nnls(R2, target, maxiter=50 * R2.shape[1])[0]
-            v = v2[: len(b)].copy()
-            v[free] -= v2[len(b):]
-        else:
-            v = nnls(R, target, maxiter=50 * R.shape[1])[0]
-    w = v / scale
-    return w, mean_y - float(mean_f @ w)
-
-
-def _factor(G: np.ndarray) -> tuple:
-    """Cholesky factor (upper) of the scaled normal matrix ``G`` with a small ridge.
-
-    The ridge starts at 1e-10 of the mean diagonal and grows a hundredfold while rounding
-    (nearly collinear columns, the mean removed by subtraction) leaves ``G`` indefinite.
-    """
-    from scipy.linalg import LinAlgError, cho_factor
-
-    trace = max(float(np.trace(G)), 1e-300)
-    for ridge in (1e-10, 1e-8, 1e-6, 1e-4):
-        ridged = G.copy()
-        ridged[np.diag_indices_from(ridged)] += ridge * trace / len(G)
-        try:
-            return cho_factor(ridged, lower=False)
-        except LinAlgError:
-            continue
-    ridged[np.diag_indices_from(ridged)] += 1e-2 * trace / len(G)
-    return cho_factor(ridged, lower=False)
 
 
 # ----- a family's problem -----------------------------------------------------------------------------
@@ -701,69 +442,3 @@ def refine(problem: Problem, record: Record, block: LinearDynamics, move_block: 
     if move_block and sum(share for share, _ in fit.block.creep) > (1 - 1e-3) * MOST_CREEP:
         fit.at_bounds += (f"creep shares (together at their most, {MOST_CREEP})",)
     return fit
-
-
-# ----- the dynamics -----------------------------------------------------------------------------------
-
-def _grid(kind: str, record: Record) -> list[np.ndarray]:
-    """Block parameters (:func:`block_theta`) the dead-time search tries.
-
-    Lags from a tenth of a sample to a tenth of the record, resonances from 10 cycles per record
-    to Nyquist.
-    """
-    T, duration = record.sample_period, record.sample_period * len(record.u)
-    if kind == "first-order":
-        return [np.log([tau]) for tau in np.geomspace(0.1 * T, max(0.1 * duration, T), 24)]
-    if kind == "second-order":
-        return [np.log([f, zeta]) for f in np.geomspace(min(10.0 / duration, 0.04 / T), 0.45 / T, 18)
-                for zeta in (0.05, 0.15, 0.35, 0.7, 1.2)]
-    return [np.zeros(0)]
-
-
-def fit_block(h: np.ndarray, record: Record, kind: str, delays: Sequence[int],
-              creep: tuple = ()) -> tuple[LinearDynamics, float]:
-    """The block ``kind`` and dead time that best map one hysteresis output ``h`` onto the record.
-
-    The gain and offset are projected. A grid search (each dead time with every grid block; for
-    a second-order block, the dead times within 2 samples of the best lag's), then a
-    least-squares polish of the best.
-
-    Parameters
-    ----------
-    h : ndarray
-        One hysteresis output, one value per sample.
-    record : Record
-        The record.
-    kind : str
-        Block kind (``"none"``, ``"first-order"``, ``"second-order"``).
-    delays : sequence of int
-        Dead times to try (samples).
-    creep : tuple, optional
-        Creep elements the blocks carry (:attr:`LinearDynamics.creep`); the polish moves their shares.
-
-    Returns
-    -------
-    tuple
-        ``(block, rmse)``: the best block with its dead time, and its RMSE after the warm-up.
-    """
-    rows = record.rows()
-    y = record.y[rows]
-
-    def cost(block):
-        f = respond(h, block, record)[rows]
-        fc, yc = f - f.mean(), y - y.mean()
-        gain = float(fc @ yc) / max(float(fc @ fc), 1e-300)
-        return float(np.mean((yc - gain * fc) ** 2))
-
-    def search(kind, delays):
-        return min(((cost(replace(block_of(kind, z, d), creep=creep)), d, tuple(z)) for d in delays
-                    for z in _grid(kind, record)), key=lambda item: item[0])
-    if kind == "second-order":
-        _, lag_delay, _ = search("first-order", delays)
-        _, delay, z = search(kind, [d for d in delays if abs(d - lag_delay) <= 2] or list(delays))
-    else:
-        _, delay, z = search(kind, delays)
-    problem = Problem([(np.zeros(0, int), lambda _: h[:, None])], np.zeros(0), np.zeros(0), np.zeros(0),
-                      np.array([False]), lambda theta, w: {})
-    fit = refine(problem, record, replace(block_of(kind, np.asarray(z), delay), creep=creep), iterations=15)
-    return fit.block, fit.rmse
