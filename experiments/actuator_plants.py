@@ -49,8 +49,9 @@ class ActuatorPlants:
     def runner_up(self) -> dict | None:
         """The ranking's second row, with its model document.
 
-        A row that is the model's family with or without the model's creep is passed over: it
-        differs from the model by the creep alone, not as another model of the record does.
+        A row of the model's family fitted with another creep, or with none where the model has
+        one (or one where it has none), is passed over: it differs from the model by the creep
+        alone, not as another model of the record does.
 
         Returns
         -------

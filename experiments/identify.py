@@ -221,14 +221,16 @@ def ranking_table(ranking, units: str) -> str:
     """
     unit = f" [{units}]" if units else ""
     naive = ranking.naive.validation_rmse
+    width = max(len(c.label) for c in [*ranking.candidates, ranking.naive]) + 1
     lines = [f"validation on {ranking.validation}",
-             f"{'family':32s} {'fit RMSE' + unit:>16s} {'validation' + unit:>16s} {'vs linear+lag':>14s} {'time':>7s}"]
+             f"{'family':{width}s} {'fit RMSE' + unit:>16s} {'validation' + unit:>16s} {'vs linear+lag':>14s} "
+             f"{'time':>7s}"]
     for c in [*ranking.candidates, ranking.naive]:
         if c.error:
-            lines.append(f"{c.label:32s} {'failed: ' + c.error}")
+            lines.append(f"{c.label:{width}s} {'failed: ' + c.error}")
             continue
         ratio = c.validation_rmse / naive if naive > 0 else float("nan")
-        lines.append(f"{c.label:32s} {c.fit_rmse:16.4g} {c.validation_rmse:16.4g} {ratio:14.3f} {c.seconds:6.1f}s")
+        lines.append(f"{c.label:{width}s} {c.fit_rmse:16.4g} {c.validation_rmse:16.4g} {ratio:14.3f} {c.seconds:6.1f}s")
     return "\n".join(lines)
 
 

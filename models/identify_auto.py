@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hystmpc.models.block_fit import fit_block
+from hystmpc.models.block_parameters import FASTEST_CREEP
 from hystmpc.models.identification import (
     FAMILIES,
     FitError,
@@ -44,7 +45,7 @@ COST = {"preisach": 5, "generalised-pi": 4, "power-function": 3, "prandtl-ishlin
 
 @dataclass
 class Candidate:
-    """One family's result in the ranking."""
+    """One family's result in the ranking, fitted with a creep or without."""
 
     family: str
     identified: Identified | None
@@ -244,8 +245,8 @@ def identify_auto(u, y, sample_period: float, validation: tuple | None = None, c
         Fit options per family name.
     dynamics, dynamics_data, max_delay, alignment, warm_up, creep
         As for :func:`hystmpc.models.identification.identify` (the resonance check runs once).
-        With a creep, every family is fitted with it and without it (one candidate each; not
-        with a form the family takes none of).
+        With a creep, every family is fitted with it and without it (one candidate each; a family
+        that takes no creep of the form, and fckp with its own Grünwald–Letnikov creep, once).
     workers : int, optional
         Families fitted at once, each in its own process.
 
@@ -274,10 +275,16 @@ def identify_auto(u, y, sample_period: float, validation: tuple | None = None, c
     form = creep_form(creep)
     kw = {"dynamics": dynamics, "dynamics_data": dynamics_data, "max_delay": max_delay, "alignment": alignment,
           "warm_up": warm_up, "check_resonance": False}
+    if form == "kelvin-voigt" and len(u) < FASTEST_CREEP:  # refused once, here, as identify refuses it
+        raise ValueError(f"a Kelvin–Voigt creep needs a fit record of at least {FASTEST_CREEP} samples (its elements "
+                         f"are slower than that); the record's fit part has {len(u)}")
     creeps = [form, None] if form else [None]  # the slower fits first
+
+    def fitted(name, c):  # fckp fits its own Grünwald–Letnikov creep either way: once
+        return c is None or (takes_creep(name, c) and (name, c) != ("fckp", "grunwald-letnikov"))
     jobs = [(name, u, y, sample_period, (options or {}).get(name, {}), kw | {"creep": c}, validation,
              continue_state, warm_up)
-            for c in creeps for name in names if c is None or takes_creep(name, c)]
+            for c in creeps for name in names if fitted(name, c)]
     if workers > 1 and len(jobs) > 1:
         with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), initializer=_one_blas_thread) as pool:
             candidates = list(pool.map(_one, jobs))

@@ -240,6 +240,10 @@ def test_identify_auto_ranks_each_family_with_and_without_the_creep():
     labels = sorted(c.label for c in ranking.candidates)
     assert labels == ["kp", "prandtl-ishlinskii", "prandtl-ishlinskii + grunwald-letnikov"]
     assert not any(c.error for c in ranking.candidates)
+    ranking = identify_auto(u[:600], record(u[:600], 1), DT, families=["fckp"], creep=True, workers=1)
+    assert [c.label for c in ranking.candidates] == ["fckp"]  # its own creep: fitted once
+    with pytest.raises(ValueError, match="at least 100 samples .* the record's fit part has 70"):
+        identify_auto(u[:100], u[:100], DT, families=["kp"], creep="kelvin-voigt", workers=1)
 
 
 def test_model_document_round_trip(tmp_path):

@@ -83,15 +83,19 @@ def test_a_runner_up_closer_than_the_models_error_is_taken_whole(tmp_path):
     assert spec.runner_up_weight() == 1.0
 
 
-def test_the_runner_up_is_not_the_model_with_its_creep_left_out(tmp_path):
+@pytest.mark.parametrize("model_creep", ["kelvin-voigt", None])
+def test_the_runner_up_is_not_the_model_with_its_creep_added_or_left_out(tmp_path, model_creep):
     """``identify auto --creep`` ranks each family with and without it: the model's own family
-    without its creep is passed over for the next row."""
+    fitted the other way is passed over for the next row."""
     path = _ranked_folder(tmp_path)
     doc = json.loads((tmp_path / "piezo_model.json").read_text())
     best, other = doc["candidates"]
-    best["creep"] = other["creep"] = "kelvin-voigt"  # the fixture's runner-up is of the model's family
     twin = copy.deepcopy(best) | {"distance_to_best": 0.01}
-    del twin["creep"]
+    for row, creep in ((best, model_creep), (other, model_creep), (twin, "grunwald-letnikov" if model_creep is None
+                                                                   else None)):
+        row.pop("creep", None)  # the fixture's runner-up is of the model's family, fitted as the model
+        if creep:
+            row["creep"] = creep
     doc["candidates"] = [best, twin, other]
     (tmp_path / "piezo_model.json").write_text(json.dumps(doc))
     assert ActuatorSpec(path).runner_up()["distance_to_best"] == 0.3

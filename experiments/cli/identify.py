@@ -42,7 +42,8 @@ def add_parser(sub) -> None:
                       help="fit a creep after the hysteresis too: grunwald-letnikov (a fractional integral; not "
                       "for kp or power-function) or kelvin-voigt (first-order elements in the linear block, any "
                       "family, fckp too after its own; the controller generates in C); --creep alone: "
-                      "grunwald-letnikov (fckp has its own); with auto, every family is ranked with and without it")
+                      "grunwald-letnikov (fckp has its own); with auto, every family is ranked with and without "
+                      "it (one that takes no creep of the form: without)")
     p_id.add_argument("--units", default="", help="output units, recorded in the model document (e.g. um)")
     p_id.add_argument("--input-units", default="", help="input units (e.g. V)")
     p_id.add_argument("--data-file", dest="bench_data", metavar="FILE",
