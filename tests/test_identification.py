@@ -190,21 +190,27 @@ def test_a_bad_creep_is_refused_naming_it(creep, message):
         dynamics_from({"kind": "none", "creep": creep}, "model.json")
 
 
-def test_a_kelvin_voigt_creep_is_fitted_with_any_family():
-    """A PI stage whose output creeps by 9 % over two elements off the fit's time-constant ladder
-    validates at the noise; kp, which takes no Grünwald–Letnikov creep, takes this one."""
+def _creeping_pi(creep):
+    """``record(u, seed)``: a PI stage whose output creeps through Kelvin–Voigt elements ``creep``, noise 0.01."""
     truth = PrandtlIshlinskii(0.05, (13.0, 31.0), (0.04, 0.02))
-    block = LinearDynamics(creep=((0.05, 0.23), (0.04, 1.7)))
-    u, u_val = fit_input(0, 100, n=2000, levels=40), validation_input(0, 100)
+    block = LinearDynamics(creep=creep)
 
     def record(u, seed):
         y = block.response(hysteresis_output(truth, 0.0, u, DT) + 0.2, DT, from_steady_state=True)
         return y + 0.01 * np.random.default_rng(seed).standard_normal(len(u))
+    return record
+
+
+def test_a_kelvin_voigt_creep_is_fitted_with_any_family():
+    """A PI stage whose output creeps by 9 % over two elements off the fit's time-constant ladder
+    validates at the noise; kp, which takes no Grünwald–Letnikov creep, takes this one."""
+    u, u_val = fit_input(0, 100, n=2000, levels=40), validation_input(0, 100)
+    record = _creeping_pi(((0.05, 0.23), (0.04, 1.7)))
     fitted = identify("prandtl-ishlinskii", u, record(u, 1), DT, creep="kelvin-voigt", alignment="next")
     assert sum(share for share, _ in fitted.dynamics.creep) == pytest.approx(0.09, abs=0.01)
     assert np.sqrt(np.mean((fitted.predict(u_val) - record(u_val, 2)) ** 2)) < 1.1 * 0.01
     assert all(share >= 1e-6 for share, _ in fitted.dynamics.creep)  # the unused elements left out
-    block = LinearDynamics(creep=((0.3, 0.37),))  # one large element, its time constant off the start's ladder
+    record = _creeping_pi(((0.3, 0.37),))  # one large element, its time constant off the start's ladder
     fitted = identify("prandtl-ishlinskii", u, record(u, 1), DT, creep="kelvin-voigt", alignment="next")
     assert np.sqrt(np.mean((fitted.predict(u_val) - record(u_val, 2)) ** 2)) < 1.1 * 0.01
     share, tau = max(fitted.dynamics.creep)  # its twins merged into one element
@@ -222,13 +228,8 @@ def test_identify_auto_ranks_each_family_with_and_without_the_creep():
     that takes no creep of that form is ranked without it, not as a failure."""
     from hystmpc.experiments.identify import _candidate
     from hystmpc.models.identify_auto import identify_auto
-    truth = PrandtlIshlinskii(0.05, (13.0, 31.0), (0.04, 0.02))
-    block = LinearDynamics(creep=((0.05, 0.23), (0.04, 1.7)))
     u, u_val = fit_input(0, 100, n=2000, levels=40), validation_input(0, 100)
-
-    def record(u, seed):
-        y = block.response(hysteresis_output(truth, 0.0, u, DT) + 0.2, DT, from_steady_state=True)
-        return y + 0.01 * np.random.default_rng(seed).standard_normal(len(u))
+    record = _creeping_pi(((0.05, 0.23), (0.04, 1.7)))
     ranking = identify_auto(u, record(u, 1), DT, (u_val, record(u_val, 2)), families=["prandtl-ishlinskii"],
                             creep="kelvin-voigt", alignment="next", workers=1)
     with_creep, without = ranking.candidates
