@@ -23,7 +23,7 @@ from hystmpc.experiments.baselines import (
 from hystmpc.experiments.baselines.pid import NOTCH_DAMPING
 from hystmpc.experiments.tuning import tuned_baselines
 from hystmpc.models.prediction import Smoothing, build_prediction_model
-from hystmpc.mpc import InputBounds, NmpcController
+from hystmpc.mpc import InputBounds, NmpcController, default_observer
 from hystmpc.mpc.linear_mpc import InverseLinearMpc, LinearMpcSettings
 
 
@@ -108,8 +108,9 @@ class ActuatorControllers:
                                     eps=smoothing.eps, direction_eps=smoothing.direction,
                                     delay_samples=model.dynamics.delay_samples, creep_order=creep_order)
         bounds = InputBounds(*self.input_bounds, self.input_rate)
-        noise = self._estimator_noise()
-        return NmpcController(pm, bounds, config["nmpc"], config["solver"], sensor_noise=noise)
+        observer = default_observer(pm, self._estimator_noise(),
+                                    disturbance_walk=np.sqrt(config["estimator"].disturbance))
+        return NmpcController(pm, bounds, config["nmpc"], config["solver"], observer=observer)
 
     def build_inverse_lmpc(self, config: dict, settings: LinearMpcSettings | None = None) -> InverseLinearMpc:
         """``inverse-lmpc`` on the ``model`` group: the exact inverse hysteresis and a linear MPC.
@@ -136,7 +137,8 @@ class ActuatorControllers:
         noise = self._estimator_noise()
         n_block = linear.nx - model.dynamics.delay_samples
         # as the NMPC's EKF (DisturbanceEKF.from_sensor_noise); the queue of virtual inputs is known exactly
-        process = [(0.01 * noise) ** 2] * n_block + [1e-12 * noise**2] * model.dynamics.delay_samples + [noise**2]
+        process = [(0.01 * noise) ** 2] * n_block + [1e-12 * noise**2] * model.dynamics.delay_samples + \
+            [config["lmpc_estimator"].disturbance]
         initial = [(10 * noise) ** 2] * n_block + [1e-12 * noise**2] * model.dynamics.delay_samples + \
             [(1000 * noise) ** 2]
         return InverseLinearMpc(
@@ -148,12 +150,13 @@ class ActuatorControllers:
             initial_covariance=initial)
 
     def tuned_gains(self, config: dict) -> dict[str, Any]:
-        """Both PID baselines' gains, ``inverse-ff-pid``'s preview and ``inverse-lmpc``'s rate weight.
+        """The baselines' tuned gains, preview and rate weight, and both estimators' disturbance walks.
 
         The gains come from :func:`hystmpc.experiments.tuning.tune_pid` on the nominal ``model``
         group. For ``inverse-ff-pid`` also its preview: of dead time + one sample + the block's
         lag and its two neighbours, the one with the best point of the coarse gain grid, before
-        the gains are tuned at it. For ``inverse-lmpc`` its rate weight
+        the gains are tuned at it. For ``inverse-lmpc`` its rate weight, then its Kalman filter's
+        disturbance walk, and the NMPC's EKF's disturbance walk
         (:func:`hystmpc.experiments.tuning.tuned_baselines`).
 
         Tuning runs many closed loops, so the result is kept in memory and on disk

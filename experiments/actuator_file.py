@@ -10,7 +10,7 @@ From one file hystmpc builds, for every command that takes a bench:
   :meth:`ActuatorSpec.tuning_ensemble`), behind a notch on the command where the linear
   block is a lightly damped mode (:meth:`ActuatorSpec.command_notch`), and ``inverse-lmpc``,
   the inverse model in series with the input and a linear MPC on the linear block, whose
-  rate weight is tuned the same way;
+  rate weight is tuned the same way, as are both estimators' disturbance walks;
 * a **simulated plant**: the exact, non-smooth model (or, with ``plant.truth = runner-up``,
   the model and the runner-up family of an ``identify auto`` ranking in parallel, blended by
   what the model missed on the validation record), every parameter perturbed by a seeded
@@ -22,8 +22,8 @@ The plants are built in :mod:`hystmpc.experiments.actuator_plants`, the controll
 module reads the file and puts the bench together.
 
 Groups for ``--set`` (and for optional tables of the same names in the file): ``plant``
-(mismatch, seed, noise, truth), ``model`` (``model.hysteresis.*``: the family's parameters;
-``model.dynamics.*``), ``nmpc``, ``smoothing``, ``solver``, ``pid``, ``inverse_ff_pid``, ``lmpc``.
+(mismatch, seed, noise, truth), ``model`` (``model.hysteresis.*``; ``model.dynamics.*``) and
+those of :data:`GROUP_TABLES`.
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from hystmpc.experiments.actuator_controllers import ActuatorControllers
-from hystmpc.experiments.actuator_groups import ActuatorModel, ActuatorPlant, parameter_class
+from hystmpc.experiments.actuator_groups import ActuatorModel, ActuatorPlant, DisturbanceWalk, parameter_class
 from hystmpc.experiments.actuator_plants import ActuatorPlants
 from hystmpc.experiments.baselines import (
     FeedforwardPidGains,
@@ -59,18 +59,15 @@ _WARNED: set[str] = set()
 """Warnings already given, once per file and process (the output range beyond the model's
 reach: the path; a linear block above Nyquist: the path with "#nyquist")."""
 SECOND_START_SHARE = 0.0025
-"""The NMPC solves from the inverse model's inputs too where its first plan misses the
-reference by this share of the output span (RMS over the horizon, and at its end): where the shifted plan
-tracks, the second start hardly ever wins (docs/your-actuator.md)."""
-GROUP_TABLES = ("nmpc", "smoothing", "solver", "pid", "inverse_ff_pid", "lmpc")
+"""The NMPC solves from the inverse model's inputs too where its first plan misses the reference by this
+share of the output span (RMS over the horizon, and at its end): where the shifted plan tracks, the second
+start hardly ever wins (docs/your-actuator.md)."""
+GROUP_TABLES = ("nmpc", "smoothing", "solver", "pid", "inverse_ff_pid", "lmpc", "estimator", "lmpc_estimator")
 """Optional tables that set the groups of the same name (as ``--set`` would)."""
-TABLES = {
-    "model": {"file"},
-    "dynamics": {"kind", "natural_frequency_hz", "damping", "time_constant", "delay_samples", "creep"},
-    "sensor": {"noise_std"},
-    "plant": {"mismatch", "seed", "truth"},
-    "scenarios": {"sine_hz", "step_s", "duration_s"},
-}
+NMPC_GROUPS, LMPC_GROUPS = ("model", "nmpc", "smoothing", "solver", "estimator"), ("model", "lmpc", "lmpc_estimator")
+TABLES = {"model": {"file"}, "sensor": {"noise_std"}, "plant": {"mismatch", "seed", "truth"},
+          "dynamics": {"kind", "natural_frequency_hz", "damping", "time_constant", "delay_samples", "creep"},
+          "scenarios": {"sine_hz", "step_s", "duration_s"}}
 KEYS = {"name", "description", "sample_period", "output_name", "units", "input_units", "input_bounds",
         "input_rate", "output_range", *TABLES, *GROUP_TABLES}
 
@@ -317,11 +314,10 @@ class ActuatorSpec(ActuatorPlants, ActuatorControllers):
         horizon = int(np.clip(self.dynamics.delay_samples + round(self._settling() / self.sample_period) + 2, 10, 40))
         nmpc_horizon = min(horizon, self._longest_horizon())
         config = {"plant": self.plant, "model": model,
-                  # runtime auto: the generated whole controller in the loop, as it would be flashed
-                  # multistart: a second RTI plan from the inverse model's inputs where the first
-                  # misses the reference by SECOND_START_SHARE of the span (RMS over the horizon and
-                  # at its end), the cheaper plan kept; it pays where the identified model is off
-                  # (docs/your-actuator.md)
+                  # runtime auto: the generated whole controller in the loop, as it would be flashed;
+                  # multistart: a second RTI plan from the inverse model's inputs where the first misses
+                  # the reference by SECOND_START_SHARE of the span (RMS over the horizon and at its end),
+                  # the cheaper plan kept; it pays where the identified model is off (docs/your-actuator.md)
                   "nmpc": NmpcSettings(horizon=nmpc_horizon, q_output=(100 / span_y) ** 2,
                                        r_rate=1e-3 * (100 / span_u) ** 2, solver="rti-c", runtime="auto",
                                        multistart=True, second_start_error=SECOND_START_SHARE * span_y,
@@ -333,7 +329,9 @@ class ActuatorSpec(ActuatorPlants, ActuatorControllers):
                   # the NMPC's weights and uncapped horizon (a Python baseline, not real time above
                   # 1 kHz either way), the rate weight on the virtual input (output units)
                   "lmpc": LinearMpcSettings(horizon=horizon, q_output=(100 / span_y) ** 2,
-                                            r_rate=1e-3 * (100 / span_y) ** 2)}
+                                            r_rate=1e-3 * (100 / span_y) ** 2),
+                  # the walks before tuning: the sensor noise per sample (tuned_gains keeps it or a tenth)
+                  **dict.fromkeys(("estimator", "lmpc_estimator"), DisturbanceWalk(self._estimator_noise() ** 2))}
         return apply_values(config, self.table_values, self._unused_keys())
 
     def _longest_horizon(self) -> int:
@@ -446,10 +444,10 @@ class ActuatorSpec(ActuatorPlants, ActuatorControllers):
                                              "on the tuning ensemble", lambda c: self.build_pid(c, True),
                                              ("model", "inverse_ff_pid")),
             "inverse-lmpc": ControllerSpec("inverse-lmpc", "inverse hysteresis model in series with the input + "
-                                           "linear MPC (OSQP) on the linear block, rate weight tuned on the tuning "
-                                           "ensemble", self.build_inverse_lmpc, ("model", "lmpc")),
-            "nmpc": ControllerSpec("nmpc", "NMPC on the smoothed identified model, inverse warm start",
-                                   self.build_nmpc, ("model", "nmpc", "smoothing", "solver"), planner="inverse-lmpc"),
+                                           "linear MPC (OSQP) on the linear block, rate weight and walk tuned on the "
+                                           "tuning ensemble", self.build_inverse_lmpc, LMPC_GROUPS),
+            "nmpc": ControllerSpec("nmpc", "NMPC on the smoothed identified model, inverse warm start, walk tuned on "
+                                   "the tuning ensemble", self.build_nmpc, NMPC_GROUPS, planner="inverse-lmpc"),
         }
         return Bench(name=self.name, description=self.description, paper="", output_name=self.output_name,
                      units=self.units, input_units=self.input_units, sample_period=self.sample_period,

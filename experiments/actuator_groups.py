@@ -45,6 +45,23 @@ class ActuatorPlant:
 
 
 @dataclass(frozen=True)
+class DisturbanceWalk:
+    """How fast a controller's estimator lets the model's error move.
+
+    ``--set estimator.*`` for the NMPC's EKF, ``lmpc_estimator.*`` for ``inverse-lmpc``'s
+    Kalman filter.
+    """
+
+    disturbance: float = 1.0
+    """Variance per sample of the output disturbance's random walk (output units²): tuned to the
+    sensor noise squared or a hundredth of it, unless set."""
+
+    def __post_init__(self):
+        if not (np.isfinite(self.disturbance) and self.disturbance > 0):
+            raise ValueError(f"disturbance must be finite and > 0, got {self.disturbance}")
+
+
+@dataclass(frozen=True)
 class ActuatorModel:
     """What the controllers believe (``--set model.hysteresis.*``, ``model.dynamics.*``)."""
 

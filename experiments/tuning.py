@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from hystmpc.experiments.actuator_groups import DisturbanceWalk
 from hystmpc.experiments.baselines import FeedforwardPidGains, PidGains
 from hystmpc.experiments.report import version
 from hystmpc.experiments.runner import Scenario, simulate
@@ -221,19 +222,25 @@ def tune_pid(build: Callable[[PidGains], object], plant, scenarios: list[Scenari
     return gains_of(best.x), float(best.fun)
 
 
-TUNING_RULE = "mean-rmse-ensemble-rings-below-3-gain-margin-2-mode-notch/12"
+TUNING_RULE = "mean-rmse-ensemble-rings-below-3-gain-margin-2-mode-notch-estimator-walk/13"
 """Names the tuning rule in the cache key: change it when the rule changes."""
 
 LMPC_RATE_FACTORS = (0.01, 0.1, 1.0, 10.0, 100.0, 1e3, 1e4)
 """The rate weights ``inverse-lmpc``'s tuning tries, relative to the default (the NMPC's
 normalised rate weight, on the output span instead of the input span)."""
 
+WALK_FACTORS = (1.0, 0.01)
+"""The disturbance walks the NMPC's EKF and ``inverse-lmpc``'s Kalman filter are tuned over, as
+multiples of the default variance per sample (the sensor noise squared): the noise's own pace
+(the model's error may move as fast as a sample of noise), and a tenth of it in standard
+deviation (the model is trusted to drift slowly; less noise reaches the input)."""
+
 TUNING_SEED = 1
 """Sensor-noise seed of the tuning runs (the comparison's default is 0)."""
 
 
 def tuned_baselines(spec: ActuatorSpec, model, config: dict) -> dict[str, Any]:
-    """An actuator file's baselines tuned on its nominal model: PID, inverse-ff-pid, inverse-lmpc.
+    """An actuator file's baselines tuned on its nominal model (PID, inverse-ff-pid, inverse-lmpc), and the NMPC's walk.
 
     The PID gains come from :func:`tune_pid` on the tuning ensemble
     (:meth:`~hystmpc.experiments.actuator_file.ActuatorSpec.tuning_ensemble`); ``inverse-ff-pid``
@@ -241,7 +248,9 @@ def tuned_baselines(spec: ActuatorSpec, model, config: dict) -> dict[str, Any]:
     neighbours, the one with the best point of the coarse grid), ``inverse-lmpc`` its rate
     weight (the multiple of the default in :data:`LMPC_RATE_FACTORS` with the least mean RMSE
     and no ringing run, on the ensemble with the file's sensor noise, seed
-    :data:`TUNING_SEED`). The result is cached on disk
+    :data:`TUNING_SEED`), then the disturbance walk of its Kalman filter and of the NMPC's EKF
+    (of the default variance times each of :data:`WALK_FACTORS`, by the same rule). The result
+    is cached on disk
     (:func:`hystmpc.mpc.codegen.user_cache_dir`), keyed by everything it depends on.
 
     Parameters
@@ -256,14 +265,18 @@ def tuned_baselines(spec: ActuatorSpec, model, config: dict) -> dict[str, Any]:
     Returns
     -------
     dict
-        ``pid`` (PidGains), ``inverse_ff_pid`` (FeedforwardPidGains) and ``lmpc``
-        (LinearMpcSettings).
+        ``pid`` (PidGains), ``inverse_ff_pid`` (FeedforwardPidGains), ``lmpc``
+        (LinearMpcSettings), ``lmpc_estimator`` and ``estimator`` (DisturbanceWalk).
     """
     identity = json.dumps({"rule": TUNING_RULE, "version": version(), "model": dataclasses.asdict(model),
                            "sample_period": spec.sample_period, "bounds": spec.input_bounds,
                            "rate": str(spec.input_rate), "scenarios": [spec.sine_hz, spec.step_s, spec.duration_s],
                            "output_range": spec.output_range, "noise": spec.noise,
-                           "lmpc": dataclasses.asdict(config["lmpc"]), "lmpc_factors": LMPC_RATE_FACTORS,
+                           "lmpc": dataclasses.asdict(config["lmpc"]),
+                           "lmpc_estimator": dataclasses.asdict(config["lmpc_estimator"]),
+                           "lmpc_factors": LMPC_RATE_FACTORS, "walk_factors": WALK_FACTORS,
+                           "nmpc": [dataclasses.asdict(config[g])
+                                    for g in ("nmpc", "smoothing", "solver", "estimator")],
                            "runner_up": spec.runner_up(),
                            "runner_up_weight": spec.runner_up_weight() if spec.runner_up() else None},
                           sort_keys=True, default=str)
@@ -271,7 +284,9 @@ def tuned_baselines(spec: ActuatorSpec, model, config: dict) -> dict[str, Any]:
     try:
         stored = json.loads(path.read_text())
         return {"pid": PidGains(**stored["pid"]), "inverse_ff_pid": FeedforwardPidGains(**stored["inverse_ff_pid"]),
-                "lmpc": LinearMpcSettings(**stored["lmpc"])}
+                "lmpc": LinearMpcSettings(**stored["lmpc"]),
+                "lmpc_estimator": DisturbanceWalk(**stored["lmpc_estimator"]),
+                "estimator": DisturbanceWalk(**stored["estimator"])}
     except (OSError, ValueError, KeyError, TypeError):
         pass
     LOG.info("tuning the baselines of %s on its nominal model%s (once; cached in %s)", spec.name,
@@ -317,8 +332,45 @@ def _tune(spec: ActuatorSpec, model, config: dict) -> dict[str, Any]:
             break
     preview = min(previews, key=costs.get)
     gains = tune_pid(feedforward(preview), plants, scenarios, gain, dead, spec.sample_period)[0]
+    lmpc = _tune_lmpc(spec, model, config, scenarios)
+    noisy = spec.tuning_ensemble(model, spec.noise)
+    lmpc_walk = _tune_walk(lambda walk: spec.build_inverse_lmpc(config | {"model": model, "lmpc_estimator": walk},
+                                                                lmpc),
+                           config["lmpc_estimator"], noisy, scenarios, "inverse-lmpc", "lmpc_estimator")
+    nmpc_walk = _tune_walk(lambda walk: spec.build_nmpc(config | {"model": model, "estimator": walk}),
+                           config["estimator"], noisy, scenarios, "nmpc", "estimator")
     return {"pid": pid, "inverse_ff_pid": FeedforwardPidGains(**dataclasses.asdict(gains), preview=preview),
-            "lmpc": _tune_lmpc(spec, model, config, scenarios)}
+            "lmpc": lmpc, "lmpc_estimator": lmpc_walk, "estimator": nmpc_walk}
+
+
+def _tune_walk(build: Callable, base: DisturbanceWalk, plants: list, scenarios: list[Scenario], name: str,
+               group: str) -> DisturbanceWalk:
+    """A controller's disturbance walk: of ``base`` times each of :data:`WALK_FACTORS`, the least mean RMSE.
+
+    The rule of :func:`_tune_lmpc`'s rate weight: the mean RMSE over ``scenarios`` on the
+    noisy tuning ensemble ``plants`` (seed :data:`TUNING_SEED`), no run ringing; ``base`` when
+    the controller cannot be built or every walk fails.
+    """
+    tried = []
+    for factor in WALK_FACTORS:
+        walk = DisturbanceWalk(base.disturbance * factor)
+        try:
+            controller = build(walk)
+        except ValueError as exc:  # the run would refuse it too, and say so there
+            LOG.info("%s: its disturbance walk is not tuned (%s)", name, exc)
+            return base
+        clean = mean_rmse(controller, plants, scenarios, seed=TUNING_SEED)
+        any_run = clean if np.isfinite(clean) else mean_rmse(controller, plants, scenarios, False, TUNING_SEED)
+        tried.append((clean, any_run, factor, walk))
+    clean, any_run, _, best = min(tried, key=lambda row: row[:2])
+    if not np.isfinite(any_run):
+        LOG.warning("%s: every disturbance walk tried failed; it keeps the default %.4g (set %s.disturbance)",
+                    name, base.disturbance, group)
+        return base
+    if not np.isfinite(clean):
+        LOG.warning("%s: every disturbance walk tried rings on the tuning ensemble; it takes the one with the least "
+                    "mean RMSE, %.4g (set %s.disturbance)", name, best.disturbance, group)
+    return best
 
 
 def _tune_lmpc(spec: ActuatorSpec, model, config: dict, scenarios: list[Scenario]) -> LinearMpcSettings:

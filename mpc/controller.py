@@ -26,7 +26,7 @@ Inverse = Callable[[Estimate, np.ndarray], np.ndarray]
 
 
 def default_observer(model: PredictionModel | CreepPredictionModel, sensor_noise=None,
-                     creep_window: int | None = None):
+                     creep_window: int | None = None, disturbance_walk: float | None = None):
     """The observer a model gets when none is given.
 
     Parameters
@@ -38,6 +38,9 @@ def default_observer(model: PredictionModel | CreepPredictionModel, sensor_noise
         (:meth:`DisturbanceEKF.from_sensor_noise`). Needed when the model has sensors.
     creep_window : int, optional
         Past samples in the creep sums of an input-driven model's observer (None: all).
+    disturbance_walk : float, optional
+        The EKF's disturbance step per sample (default: the sensor noise; see
+        :meth:`DisturbanceEKF.from_sensor_noise`).
 
     Returns
     -------
@@ -52,9 +55,9 @@ def default_observer(model: PredictionModel | CreepPredictionModel, sensor_noise
         raise ValueError(f"the model has sensors {model.sensor_names}: give sensor_noise (each sensor's standard "
                          "deviation) or an observer")
     if memory is not None:
-        ekf, p0 = DisturbanceEKF.from_sensor_noise(memory.dynamics or model, sensor_noise)
+        ekf, p0 = DisturbanceEKF.from_sensor_noise(memory.dynamics or model, sensor_noise, disturbance_walk)
         return MemoryObserver(model, ekf, initial_covariance=p0, creep_window=creep_window)
-    ekf, p0 = DisturbanceEKF.from_sensor_noise(model, sensor_noise)
+    ekf, p0 = DisturbanceEKF.from_sensor_noise(model, sensor_noise, disturbance_walk)
     return StateObserver(model, ekf, lambda z: np.zeros(model.nx), p0)
 
 

@@ -108,14 +108,15 @@ class DisturbanceEKF:
         self.x, self.d, self.P = z[: self.model.nx], z[self.model.nx:], np.asarray(P)
 
     @classmethod
-    def from_sensor_noise(cls, model: PredictionModel, sensor_noise) -> tuple[DisturbanceEKF, np.ndarray]:
-        """An EKF tuned from the sensors' noise alone, and its initial covariance.
+    def from_sensor_noise(cls, model: PredictionModel, sensor_noise,
+                          disturbance_walk: float | None = None) -> tuple[DisturbanceEKF, np.ndarray]:
+        """An EKF tuned from the sensors' noise, and its initial covariance.
 
         With ``σ`` the smallest sensor noise standard deviation: measurement noise ``σ_i²``;
-        the disturbance a random walk of ``σ`` per sample (it follows a model mismatch that
-        changes over tens of samples); the states' process noise ``(0.01 σ)²`` (the model is
-        trusted, its errors land in ``d``); initial covariance ``(10 σ)²`` on the states and
-        ``(1000 σ)²`` on ``d``.
+        the disturbance a random walk of ``disturbance_walk`` per sample (default ``σ``: it
+        follows a model mismatch that changes over tens of samples); the states' process noise
+        ``(0.01 σ)²`` (the model is trusted, its errors land in ``d``); initial covariance
+        ``(10 σ)²`` on the states and ``(1000 σ)²`` on ``d``.
 
         Parameters
         ----------
@@ -124,6 +125,9 @@ class DisturbanceEKF:
         sensor_noise : float or array_like
             Standard deviation of each sensor (one value: every sensor), > 0; unused (None)
             for a model without sensors.
+        disturbance_walk : float, optional
+            Standard deviation of the disturbance's step per sample, > 0 (how fast the model's
+            error drifts; default ``σ``).
 
         Returns
         -------
@@ -136,7 +140,10 @@ class DisturbanceEKF:
         if not np.all(np.isfinite(noise)) or np.any(noise <= 0):
             raise ValueError(f"sensor_noise must be finite and > 0, got {sensor_noise}")
         sigma = float(noise.min()) if model.nz else 1.0  # without sensors the EKF only predicts
-        process = [(0.01 * sigma) ** 2] * model.nx + [sigma**2] * model.nd
+        walk = sigma if disturbance_walk is None else float(disturbance_walk)
+        if not np.isfinite(walk) or walk <= 0:
+            raise ValueError(f"disturbance_walk must be finite and > 0, got {disturbance_walk}")
+        process = [(0.01 * sigma) ** 2] * model.nx + [walk**2] * model.nd
         initial = [(10 * sigma) ** 2] * model.nx + [(1000 * sigma) ** 2] * model.nd
         return cls(model, process, noise**2), np.asarray(initial)
 

@@ -227,9 +227,12 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
                      + (f", preview {config[g].preview}" if hasattr(config[g], "preview") else "")
                      for g in ("pid", "inverse_ff_pid") if any(c.replace("-", "_") == g for c in controllers)]
             if "inverse-lmpc" in controllers and "lmpc" in config:
-                tuned.append(f"inverse-lmpc: r_rate {config['lmpc'].r_rate:.4g}")
+                tuned.append(f"inverse-lmpc: r_rate {config['lmpc'].r_rate:.4g}, disturbance walk "
+                             f"{config['lmpc_estimator'].disturbance:.3g}")
+            if "nmpc" in controllers and "estimator" in config:
+                tuned.append(f"nmpc: disturbance walk {config['estimator'].disturbance:.3g}")
             if tuned:
-                print("baseline gains (tuned on the tuning ensemble unless set): " + "; ".join(tuned))
+                print("gains and walks (tuned on the tuning ensemble unless set): " + "; ".join(tuned))
         nmpc_runs = [r for r in runs if r.solver]
         for r in nmpc_runs:
             print("real time: " + r.real_time_verdict())
