@@ -3,7 +3,7 @@
 :class:`ActuatorControllers` is the part of
 :class:`~hystmpc.experiments.actuator_file.ActuatorSpec` that builds each controller from the
 parameter groups, with the baselines' gains tuned on the tuning ensemble
-(:mod:`hystmpc.experiments.tuning`).
+(:mod:`hystmpc.experiments.actuator_tuning`).
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from hystmpc.experiments.actuator_groups import ActuatorModel
+from hystmpc.experiments.actuator_tuning import tuned_baselines
 from hystmpc.experiments.baselines import (
     InverseCompensation,
     ModeNotch,
@@ -21,7 +22,6 @@ from hystmpc.experiments.baselines import (
     inverse_feedforward_pid,
 )
 from hystmpc.experiments.baselines.pid import NOTCH_DAMPING
-from hystmpc.experiments.tuning import tuned_baselines
 from hystmpc.models.prediction import Smoothing, build_prediction_model
 from hystmpc.mpc import InputBounds, NmpcController, default_observer
 from hystmpc.mpc.linear_mpc import InverseLinearMpc, LinearMpcSettings
@@ -93,7 +93,8 @@ class ActuatorControllers:
         Parameters
         ----------
         config : dict
-            Parameter groups (``model``, ``smoothing``, ``nmpc``, ``solver``).
+            Parameter groups (``model``, ``smoothing``, ``nmpc``, ``solver``, ``estimator``: the
+            EKF's disturbance walk).
 
         Returns
         -------
@@ -157,7 +158,7 @@ class ActuatorControllers:
         lag and its two neighbours, the one with the best point of the coarse gain grid, before
         the gains are tuned at it. For ``inverse-lmpc`` its rate weight, then its Kalman filter's
         disturbance walk, and the NMPC's EKF's disturbance walk
-        (:func:`hystmpc.experiments.tuning.tuned_baselines`).
+        (:func:`hystmpc.experiments.actuator_tuning.tuned_baselines`).
 
         Tuning runs many closed loops, so the result is kept in memory and on disk
         (:func:`hystmpc.mpc.codegen.user_cache_dir`), keyed by everything it depends on.
@@ -165,13 +166,13 @@ class ActuatorControllers:
         Parameters
         ----------
         config : dict
-            Parameter groups before tuning (``model`` and ``lmpc`` are read).
+            Parameter groups before tuning, the file's tables applied.
 
         Returns
         -------
         dict
-            ``pid`` (PidGains), ``inverse_ff_pid`` (FeedforwardPidGains) and ``lmpc``
-            (LinearMpcSettings).
+            ``pid`` (PidGains), ``inverse_ff_pid`` (FeedforwardPidGains), ``lmpc``
+            (LinearMpcSettings), ``lmpc_estimator`` and ``estimator`` (DisturbanceWalk).
         """
         model = config["model"]
         key = repr(model)

@@ -6,7 +6,7 @@ From one file hystmpc builds, for every command that takes a bench:
   creep if the family has one, and the linear block after it (exact zero-order-hold
   discretisation), with the dead time;
 * the **controllers**: ``nmpc``, and the baselines ``pid`` and ``inverse-ff-pid``, whose
-  gains are tuned automatically on the tuning ensemble (:mod:`hystmpc.experiments.tuning`,
+  gains are tuned automatically on the tuning ensemble (:mod:`hystmpc.experiments.actuator_tuning`,
   :meth:`ActuatorSpec.tuning_ensemble`), behind a notch on the command where the linear
   block is a lightly damped mode (:meth:`ActuatorSpec.command_notch`), and ``inverse-lmpc``,
   the inverse model in series with the input and a linear MPC on the linear block, whose

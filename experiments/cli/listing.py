@@ -28,7 +28,7 @@ def add_parser(sub) -> None:
     p_list.set_defaults(handler=command)
 
 
-TUNED_GROUPS = ("pid", "inverse_ff_pid", "lmpc")
+TUNED_GROUPS = ("pid", "inverse_ff_pid", "lmpc", "lmpc_estimator", "estimator")
 """An actuator file's groups that its first run tunes (``list`` shows them untuned)."""
 
 

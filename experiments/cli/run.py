@@ -176,8 +176,8 @@ def _execute(args, bench: Bench, scenario_names: list[str], controllers: list[st
     created = output_folder(out, overwrite=args.overwrite)
     with cleanup_on_error(out, created):
         own_plant = _own_plant(args, bench, config)  # last of the checks: it may open hardware
-        if any(c != "nmpc" for c in controllers):
-            config = configured(bench, args.overrides)
+        if any(c != "nmpc" for c in controllers) or bench.untuned_defaults is not None:
+            config = configured(bench, args.overrides)  # an actuator file's NMPC has a tuned walk too
         runs = _run_all(args, bench, config, scenarios, controllers, out, total, own_plant, scenario_names)
     doc = results_document(bench.name, runs, command=sys.argv[1:] if sys.argv else None)
     write_json(doc, out / "results.json")

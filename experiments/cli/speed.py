@@ -68,8 +68,8 @@ def command(args) -> int:
     from hystmpc.experiments.report import version
     bench = bench_named(args.bench)
     check_duration(args.duration)
-    config = work_config(bench, args.overrides, args.force, tuned=False)  # the NMPC alone
-    checked_codegen_settings(bench, config)
+    checked_codegen_settings(bench, work_config(bench, args.overrides, args.force, tuned=False))  # before tuning
+    config = work_config(bench, args.overrides, args.force)  # an actuator file's NMPC walk is tuned (cached)
     if args.variants:
         variants = args.variants.split(",")
         check_names("solver variant", variants, SOLVERS)
