@@ -80,7 +80,8 @@ def command(args) -> int:
     if args.target not in (None, *CODEGEN_TARGETS):
         raise UsageError(f"--target {args.target!r} is unknown; allowed: {', '.join(CODEGEN_TARGETS)}")
     checked_codegen_settings(bench, work_config(bench, args.overrides, args.force, tuned=False))  # before tuning
-    config = work_config(bench, args.overrides, args.force)  # an actuator file's NMPC walk is tuned (cached)
+    # an actuator file's NMPC walk is tuned (once, cached), unless --set gives it
+    config = work_config(bench, args.overrides, args.force, tuned=not sets_key(args.overrides, "estimator.disturbance"))
     if args.target is not None and not sets_key(args.overrides, "solver.rti.sensitivity_block"):
         from hystmpc.experiments.firmware import firmware_config
         try:

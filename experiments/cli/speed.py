@@ -21,6 +21,7 @@ from hystmpc.experiments.cli.common import (
     cleanup_on_error,
     output_folder,
     report_solver_log,
+    sets_key,
     solver_log,
     timestamped,
     work_config,
@@ -69,7 +70,8 @@ def command(args) -> int:
     bench = bench_named(args.bench)
     check_duration(args.duration)
     checked_codegen_settings(bench, work_config(bench, args.overrides, args.force, tuned=False))  # before tuning
-    config = work_config(bench, args.overrides, args.force)  # an actuator file's NMPC walk is tuned (cached)
+    # an actuator file's NMPC walk is tuned (once, cached), unless --set gives it
+    config = work_config(bench, args.overrides, args.force, tuned=not sets_key(args.overrides, "estimator.disturbance"))
     if args.variants:
         variants = args.variants.split(",")
         check_names("solver variant", variants, SOLVERS)
